@@ -1,0 +1,23 @@
+"""Errors that mean "the user asked for something impossible".
+
+Every one of them is turned by the command line into a one-line message and a non-zero exit
+status (never a traceback). Library users can catch :class:`PESError` to handle them all.
+"""
+
+from __future__ import annotations
+
+
+class PESError(Exception):
+    """Base class of every user-facing error raised by PES."""
+
+
+class ConfigError(PESError, ValueError):
+    """An unknown key, a mistyped value or an impossible setting in a configuration."""
+
+
+class ActionError(PESError, ValueError):
+    """Actions of the wrong shape, or holding NaN or infinite values."""
+
+
+class CheckpointError(PESError):
+    """A missing, corrupted or incompatible checkpoint or record file."""

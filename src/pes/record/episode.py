@@ -1,0 +1,159 @@
+"""Episode records (SPEC §5): one episode of one environment as versioned JSON.
+
+A record holds ``version``, ``config`` (the full ``EnvConfig``), ``arena`` [width, height],
+``buildings`` ([xmin, ymin, xmax, ymax] each, metres), ``building_heights``, ``altitudes``
+(flight altitude of each vehicle), ``dt``, ``agents`` (``id`` and ``role``), ``frames`` and
+``outcome``. Frame 0 is the start; frame k is the state after k control steps, with ``t``
+(seconds), ``pos`` and ``vel`` ([[x, y], ...], pursuers then the evader), ``alive`` and
+``crashed`` (one per pursuer), and ``pred`` (predicted evader positions [[x, y], ...]) when the
+policy makes predictions. ``outcome`` holds ``success``, ``steps`` and ``crashes``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Optional
+
+import torch
+
+from pes.errors import CheckpointError
+from pes.sim.config import EnvConfig
+from pes.sim.env import PursuitEvasionEnv
+
+RECORD_VERSION = 1
+REQUIRED_KEYS = ("version", "config", "arena", "buildings", "dt", "agents", "frames", "outcome")
+
+
+def _round(values: Any, digits: int = 3) -> Any:
+    if isinstance(values, list):
+        return [_round(v, digits) for v in values]
+    return round(float(values), digits)
+
+
+class EpisodeRecorder:
+    """Records environment ``index`` of ``env`` from its current state until its episode ends.
+
+    Call :meth:`start` after ``reset`` (or at any step) and :meth:`add` after every
+    ``env.step`` with its ``info``; :attr:`finished` turns true at the end of the episode and
+    later steps are ignored. ``pred`` (K, 2) metres, when given to :meth:`add`, is stored with
+    the frame.
+    """
+
+    def __init__(self, env: PursuitEvasionEnv, index: int = 0) -> None:
+        self.env, self.index = env, index
+        self.frames: list[dict[str, Any]] = []
+        self.outcome: Optional[dict[str, Any]] = None
+        self.steps = 0
+
+    @property
+    def finished(self) -> bool:
+        return self.outcome is not None
+
+    def start(self, pred: Optional[torch.Tensor] = None) -> None:
+        i = self.index
+        n = self.env.num_pursuers
+        self.frames = []
+        self.outcome = None
+        self.steps = 0
+        self._append(self.env.positions[i], self.env.velocities[i], self.env.alive[i],
+                     torch.zeros(n, dtype=torch.bool), pred)  # fmt: skip
+
+    def add(self, info: dict[str, torch.Tensor], pred: Optional[torch.Tensor] = None) -> None:
+        if self.finished:
+            return
+        i = self.index
+        self.steps += 1
+        self._append(info["positions"][i], info["velocities"][i], info["alive"][i],
+                     info["crashed"][i], pred)  # fmt: skip
+        if bool(info["success"][i]) or self._ended(info):
+            self.outcome = {
+                "success": bool(info["success"][i]),
+                "steps": int(info["steps"][i]),
+                "crashes": int(info["crashes"][i]),
+            }
+
+    def _ended(self, info: dict[str, torch.Tensor]) -> bool:
+        cfg = self.env.config
+        i = self.index
+        return (
+            int(info["steps"][i]) >= cfg.max_steps
+            or int(info["alive"][i].sum()) < cfg.capture_count
+        )
+
+    def _append(self, pos, vel, alive, crashed, pred) -> None:
+        frame = {
+            "t": round(self.steps * self.env.config.dt, 4),
+            "pos": _round(pos.tolist()),
+            "vel": _round(vel.tolist()),
+            "alive": [bool(a) for a in alive.tolist()],
+            "crashed": [bool(c) for c in crashed.tolist()],
+        }
+        if pred is not None:
+            frame["pred"] = _round(pred.reshape(-1, 2).tolist())
+        self.frames.append(frame)
+
+    def record(self) -> dict[str, Any]:
+        """The episode record (see the module docstring)."""
+        if not self.frames:
+            raise CheckpointError("nothing recorded: call start() first")
+        return make_record(self.env.config, self.env, self.frames, self.outcome)
+
+
+def make_record(config: EnvConfig, env: PursuitEvasionEnv, frames: list[dict[str, Any]],
+                outcome: Optional[dict[str, Any]]) -> dict[str, Any]:  # fmt: skip
+    """Assemble a record dict from frames recorded in ``env``."""
+    n = config.num_pursuers
+    layout = env.layout
+    last = frames[-1]
+    if outcome is None:  # stopped before the episode ended
+        outcome = {"success": False, "steps": len(frames) - 1,
+                   "crashes": sum(sum(f["crashed"]) for f in frames)}  # fmt: skip
+    return {
+        "version": RECORD_VERSION,
+        "config": asdict(config),
+        "arena": [layout.width, layout.height],
+        "buildings": _round(layout.boxes.tolist()),
+        "building_heights": _round(layout.heights.tolist()),
+        "altitudes": [config.altitude + k * config.altitude_step for k in range(n + 1)],
+        "dt": config.dt,
+        "body_radius": config.body_radius,
+        "capture_radius": config.capture_radius,
+        "agents": [{"id": f"pursuer_{k}", "role": "pursuer"} for k in range(n)]
+        + [{"id": "evader", "role": "evader"}],
+        "frames": frames,
+        "outcome": dict(outcome, final_alive=last["alive"]),
+    }
+
+
+def save_record(record: dict[str, Any], path: str | Path) -> Path:
+    """Write ``record`` as JSON to ``path`` (parents created)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, separators=(",", ":")))
+    return path
+
+
+def load_record(path: str | Path) -> dict[str, Any]:
+    """Read and check an episode record; a clear error for a missing or malformed file."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"episode record not found: {path}")
+    try:
+        record = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: not a JSON episode record ({exc})") from None
+    if not isinstance(record, dict):
+        raise CheckpointError(f"{path}: not a JSON episode record")
+    missing = [k for k in REQUIRED_KEYS if k not in record]
+    if missing:
+        raise CheckpointError(f"{path}: not an episode record (missing {', '.join(missing)})")
+    if record["version"] != RECORD_VERSION:
+        raise CheckpointError(
+            f"{path}: episode record version {record['version']}, this PES reads version "
+            f"{RECORD_VERSION}"
+        )
+    if not record["frames"]:
+        raise CheckpointError(f"{path}: the episode record has no frames")
+    return record
