@@ -14,8 +14,9 @@ is the mean over the pursuers alive at its start).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any
 
 import numpy as np
 import torch
@@ -50,10 +51,17 @@ class EvalResult:
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
 
-def evaluate(policy: Policy, config: EnvConfig, episodes: int = 100, num_envs: int = 100,
-             seed: int = 0, device: str = "cpu", compile: bool = False,
-             progress: bool = False,
-             on_step: Optional[Callable[[Any, dict], None]] = None) -> EvalResult:  # fmt: skip
+def evaluate(
+    policy: Policy,
+    config: EnvConfig,
+    episodes: int = 100,
+    num_envs: int = 100,
+    seed: int = 0,
+    device: str = "cpu",
+    compile: bool = False,
+    progress: bool = False,
+    on_step: Callable[[Any, dict], None] | None = None,
+) -> EvalResult:
     """Run ``policy`` for ``episodes`` episodes of the scenario ``config``.
 
     Args:

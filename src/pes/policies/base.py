@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Optional, Protocol
+from typing import Protocol
 
 from torch import Tensor
 
@@ -18,4 +18,4 @@ class Policy(Protocol):
 
     def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor: ...
 
-    def reset(self, mask: Optional[Tensor] = None) -> None: ...
+    def reset(self, mask: Tensor | None = None) -> None: ...

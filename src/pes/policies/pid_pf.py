@@ -9,7 +9,6 @@ SI units; see docs/policies.md.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import torch
 from torch import Tensor
@@ -72,17 +71,18 @@ class PIDPotentialField:
     and the vector to the evader.
     """
 
-    def __init__(self, config: Optional[EnvConfig] = None, gains: Optional[PIDPFConfig] = None,
-                 seed: int = 0) -> None:  # fmt: skip
+    def __init__(
+        self, config: EnvConfig | None = None, gains: PIDPFConfig | None = None, seed: int = 0
+    ) -> None:
         self.env_config = config or EnvConfig()
         self.gains = gains or PIDPFConfig()
         layout = make_layout(self.env_config)
         self.boxes = torch.tensor(layout.boxes, dtype=torch.float32).reshape(-1, 4)
         self.arena = torch.tensor([layout.width, layout.height], dtype=torch.float32)
-        self.integral: Optional[Tensor] = None
-        self.last_error: Optional[Tensor] = None
-        self.fresh: Optional[Tensor] = None  # (E,) environments whose episode just started
-        self.last_evader: Optional[Tensor] = None  # (E, N, 2) evader position seen last step
+        self.integral: Tensor | None = None
+        self.last_error: Tensor | None = None
+        self.fresh: Tensor | None = None  # (E,) environments whose episode just started
+        self.last_evader: Tensor | None = None  # (E, N, 2) evader position seen last step
 
     def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
         cfg, g = self.env_config, self.gains
@@ -148,7 +148,7 @@ class PIDPotentialField:
         rest = rest * torch.clamp(room / rest.norm(dim=-1, keepdim=True).clamp(min=1e-6), max=1.0)
         return brake * nearest + rest
 
-    def reset(self, mask: Optional[Tensor] = None) -> None:
+    def reset(self, mask: Tensor | None = None) -> None:
         if self.integral is None:
             return
         if mask is None:

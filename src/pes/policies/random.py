@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Optional
-
 import torch
 from torch import Tensor
 
@@ -13,7 +11,7 @@ class RandomPolicy:
 
     def __init__(self, config=None, seed: int = 0) -> None:
         self.seed = seed
-        self.generator: Optional[torch.Generator] = None
+        self.generator: torch.Generator | None = None
 
     def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
         if self.generator is None or self.generator.device != obs.device:
@@ -21,5 +19,5 @@ class RandomPolicy:
         shape = (obs.shape[0], obs.shape[1], 2)
         return torch.rand(shape, generator=self.generator, device=obs.device) * 2.0 - 1.0
 
-    def reset(self, mask: Optional[Tensor] = None) -> None:
+    def reset(self, mask: Tensor | None = None) -> None:
         """Stateless: nothing to forget."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import torch
 
@@ -44,29 +44,35 @@ class EpisodeRecorder:
     def __init__(self, env: PursuitEvasionEnv, index: int = 0) -> None:
         self.env, self.index = env, index
         self.frames: list[dict[str, Any]] = []
-        self.outcome: Optional[dict[str, Any]] = None
+        self.outcome: dict[str, Any] | None = None
         self.steps = 0
 
     @property
     def finished(self) -> bool:
         return self.outcome is not None
 
-    def start(self, pred: Optional[torch.Tensor] = None) -> None:
+    def start(self, pred: torch.Tensor | None = None) -> None:
         i = self.index
         n = self.env.num_pursuers
         self.frames = []
         self.outcome = None
         self.steps = 0
-        self._append(self.env.positions[i], self.env.velocities[i], self.env.alive[i],
-                     torch.zeros(n, dtype=torch.bool), pred)  # fmt: skip
+        self._append(
+            self.env.positions[i],
+            self.env.velocities[i],
+            self.env.alive[i],
+            torch.zeros(n, dtype=torch.bool),
+            pred,
+        )
 
-    def add(self, info: dict[str, torch.Tensor], pred: Optional[torch.Tensor] = None) -> None:
+    def add(self, info: dict[str, torch.Tensor], pred: torch.Tensor | None = None) -> None:
         if self.finished:
             return
         i = self.index
         self.steps += 1
-        self._append(info["positions"][i], info["velocities"][i], info["alive"][i],
-                     info["crashed"][i], pred)  # fmt: skip
+        self._append(
+            info["positions"][i], info["velocities"][i], info["alive"][i], info["crashed"][i], pred
+        )
         if bool(info["success"][i]) or self._ended(info):
             self.outcome = {
                 "success": bool(info["success"][i]),
@@ -101,15 +107,22 @@ class EpisodeRecorder:
         return make_record(self.env.config, self.env, self.frames, self.outcome)
 
 
-def make_record(config: EnvConfig, env: PursuitEvasionEnv, frames: list[dict[str, Any]],
-                outcome: Optional[dict[str, Any]]) -> dict[str, Any]:  # fmt: skip
+def make_record(
+    config: EnvConfig,
+    env: PursuitEvasionEnv,
+    frames: list[dict[str, Any]],
+    outcome: dict[str, Any] | None,
+) -> dict[str, Any]:
     """Assemble a record dict from frames recorded in ``env``."""
     n = config.num_pursuers
     layout = env.layout
     last = frames[-1]
     if outcome is None:  # stopped before the episode ended
-        outcome = {"success": False, "steps": len(frames) - 1,
-                   "crashes": sum(sum(f["crashed"]) for f in frames)}  # fmt: skip
+        outcome = {
+            "success": False,
+            "steps": len(frames) - 1,
+            "crashes": sum(sum(f["crashed"]) for f in frames),
+        }
     return {
         "version": RECORD_VERSION,
         "config": asdict(config),

@@ -7,8 +7,9 @@ GIF can be made from a run or from a saved JSON file alike.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from PIL import Image, ImageDraw, ImageFont
 
@@ -49,8 +50,12 @@ def _circle(draw: ImageDraw.ImageDraw, centre: tuple[float, float], radius: floa
 def _base(record: dict[str, Any], view: _View) -> Image.Image:
     image = Image.new("RGB", (view.width, view.height + view.header), (255, 255, 255))
     draw = ImageDraw.Draw(image)
-    draw.rectangle([0, view.header, view.width - 1, view.header + view.height - 1],
-                   fill=BACKGROUND, outline=BORDER, width=2)  # fmt: skip
+    draw.rectangle(
+        [0, view.header, view.width - 1, view.header + view.height - 1],
+        fill=BACKGROUND,
+        outline=BORDER,
+        width=2,
+    )
     for xmin, ymin, xmax, ymax in record["buildings"]:
         x0, y1 = view.point(xmin, ymin)
         x1, y0 = view.point(xmax, ymax)
@@ -58,8 +63,9 @@ def _base(record: dict[str, Any], view: _View) -> Image.Image:
     return image
 
 
-def render_frames(record: dict[str, Any], size: int = 600, trail: int = 30,
-                  every: int = 1) -> Iterator[Image.Image]:  # fmt: skip
+def render_frames(
+    record: dict[str, Any], size: int = 600, trail: int = 30, every: int = 1
+) -> Iterator[Image.Image]:
     """Yield one RGB image per ``every`` frames of ``record`` (and always the last frame).
 
     ``size`` is the pixel size of the arena's longer side; ``trail`` the number of past frames
@@ -108,15 +114,16 @@ def render_frames(record: dict[str, Any], size: int = 600, trail: int = 30,
         near = sum(g < record.get("capture_radius", 2.0) for g in gaps)
         text = f"step {k:3d}   t = {frame['t']:5.1f} s   nearest {min(gaps, default=0):5.1f} m"
         text += f"   within capture radius: {near}"
-        if k == len(frames) - 1:
-            outcome = record["outcome"]
+        outcome = record.get("outcome") or {}
+        if k == len(frames) - 1 and "steps" in outcome:
             text += "   CAPTURED" if outcome["success"] else "   escaped"
         draw.text((6, 8), text, fill=TEXT, font=font)
         yield image
 
 
-def save_gif(record: dict[str, Any], path: str | Path, fps: int = 20, every: int = 1,
-             size: int = 600) -> Path:  # fmt: skip
+def save_gif(
+    record: dict[str, Any], path: str | Path, fps: int = 20, every: int = 1, size: int = 600
+) -> Path:
     """Write the episode as an animated GIF at ``fps`` frames per second."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -124,6 +131,13 @@ def save_gif(record: dict[str, Any], path: str | Path, fps: int = 20, every: int
     palette = [im.convert("P", palette=Image.Palette.ADAPTIVE, colors=64) for im in images]
     durations = [int(1000 / fps)] * len(palette)
     durations[-1] = 2000  # hold the outcome
-    palette[0].save(path, save_all=True, append_images=palette[1:], duration=durations,
-                    loop=0, optimize=False, disposal=1)  # fmt: skip
+    palette[0].save(
+        path,
+        save_all=True,
+        append_images=palette[1:],
+        duration=durations,
+        loop=0,
+        optimize=False,
+        disposal=1,
+    )
     return path

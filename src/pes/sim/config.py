@@ -162,20 +162,39 @@ class EnvConfig:
     def validate(self) -> EnvConfig:
         """Raise :class:`ConfigError` if any setting is impossible; return ``self``."""
         positive = [
-            "arena_width", "arena_height", "block_size", "dt", "body_radius",
-            "pursuer_mass", "pursuer_max_speed", "pursuer_max_accel",
-            "evader_mass", "evader_max_speed", "evader_max_accel",
-            "capture_radius", "attitude_bandwidth", "attitude_damping", "softplus_k",
-            "max_tilt_deg", "pursuer_spawn_band", "evader_spawn_radius",
-        ]  # fmt: skip
+            "arena_width",
+            "arena_height",
+            "block_size",
+            "dt",
+            "body_radius",
+            "pursuer_mass",
+            "pursuer_max_speed",
+            "pursuer_max_accel",
+            "evader_mass",
+            "evader_max_speed",
+            "evader_max_accel",
+            "capture_radius",
+            "attitude_bandwidth",
+            "attitude_damping",
+            "softplus_k",
+            "max_tilt_deg",
+            "pursuer_spawn_band",
+            "evader_spawn_radius",
+        ]
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a positive number, got {value!r}")
         non_negative = [
-            "street_width", "block_jitter", "spawn_clearance", "safe_distance",
-            "altitude_step", "disturbance_scale", "cooperation_weight", "self_weight",
-        ]  # fmt: skip
+            "street_width",
+            "block_jitter",
+            "spawn_clearance",
+            "safe_distance",
+            "altitude_step",
+            "disturbance_scale",
+            "cooperation_weight",
+            "self_weight",
+        ]
         for name in non_negative:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -185,9 +204,15 @@ class EnvConfig:
             if len(value) != 3 or not all(math.isfinite(v) and v > 0 for v in value):
                 raise ConfigError(f"{name} must be three positive numbers, got {list(value)!r}")
         positive_ints = [
-            "num_pursuers", "grid_rows", "grid_cols", "physics_substeps", "max_steps",
-            "capture_count", "capture_hold", "history_length",
-        ]  # fmt: skip
+            "num_pursuers",
+            "grid_rows",
+            "grid_cols",
+            "physics_substeps",
+            "max_steps",
+            "capture_count",
+            "capture_hold",
+            "history_length",
+        ]
         for name in positive_ints:
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")

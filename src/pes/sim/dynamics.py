@@ -58,20 +58,25 @@ class VehicleParams:
     kp: float  # attitude proportional gain (1/s^2), per unit inertia
     ki: float  # attitude integral gain (1/s^3), per unit inertia
     kd: float  # attitude derivative gain (1/s), per unit inertia
+    setpoint_weight: float  # share of the setpoint in the proportional term
     max_tilt: float  # rad
 
 
-def attitude_gains(bandwidth: float, damping: float,
-                   integral_ratio: float = 0.1) -> tuple[float, float, float]:  # fmt: skip
-    """PID gains (kp, ki, kd), per unit inertia, that place the closed attitude loop's poles at
-    a pair of natural frequency ``bandwidth`` (rad/s) and damping ``damping`` plus a slow real
-    pole at ``integral_ratio * bandwidth`` (the integral action).
+def attitude_gains(
+    bandwidth: float, damping: float, integral_ratio: float = 0.1
+) -> tuple[float, float, float, float]:
+    """PID gains (kp, ki, kd), per unit inertia, and the setpoint weight b of the attitude loop.
 
-    For J*theta'' = M with M = J*(kp*e + ki*int(e) - kd*theta'), the characteristic polynomial
-    s^3 + kd s^2 + kp s + ki equals (s + a w)(s^2 + 2 z w s + w^2).
+    For J*theta'' = M with M = J*(kp*(b*r - theta) + ki*int(r - theta) - kd*theta'), the
+    characteristic polynomial s^3 + kd s^2 + kp s + ki is placed at
+    (s + a w)(s^2 + 2 z w s + w^2): a pair of natural frequency ``bandwidth`` (rad/s) and
+    damping ``damping``, and a slow real pole at ``a w`` (``a`` = ``integral_ratio``) for the
+    integral action. The weight b = 1 / (1 + 2 z a) puts the closed loop's zero on that slow
+    pole, so that the response to the setpoint r is exactly w^2 / (s^2 + 2 z w s + w^2): no
+    overshoot at z = 1, while the integral still rejects constant disturbance moments.
     """
     w, z, a = bandwidth, damping, integral_ratio
-    return w * w * (1 + 2 * z * a), a * w**3, w * (2 * z + a)
+    return w * w * (1 + 2 * z * a), a * w**3, w * (2 * z + a), 1.0 / (1 + 2 * z * a)
 
 
 def clip_norm(ax: Tensor, ay: Tensor, max_norm: Tensor) -> tuple[Tensor, Tensor]:
@@ -132,8 +137,16 @@ def _repeat(body, state: tuple[Tensor, ...], times: int) -> tuple[Tensor, ...]:
     return state
 
 
-def quadrotor_step(v: Vehicles, ax_cmd: Tensor, ay_cmd: Tensor, fx: Tensor, fy: Tensor,
-                   p: VehicleParams, dt: float, substeps: int) -> Vehicles:  # fmt: skip
+def quadrotor_step(
+    v: Vehicles,
+    ax_cmd: Tensor,
+    ay_cmd: Tensor,
+    fx: Tensor,
+    fy: Tensor,
+    p: VehicleParams,
+    dt: float,
+    substeps: int,
+) -> Vehicles:
     """Advance the quadrotors by one control step of ``dt`` seconds in ``substeps`` sub-steps.
 
     Args:
@@ -141,12 +154,14 @@ def quadrotor_step(v: Vehicles, ax_cmd: Tensor, ay_cmd: Tensor, fx: Tensor, fy: 
         ax_cmd, ay_cmd: desired horizontal acceleration (E, A), m/s^2, already clipped.
         fx, fy: external horizontal force (E, A), N, constant over the step.
 
-    Each sub-step: the attitude PID gives the moments M = J (kp e + ki int(e) - kd rate);
+    Each sub-step: the attitude PID gives the moments
+    M = J (kp (b ref - att) + ki int(ref - att) - kd rate) (see :func:`attitude_gains`);
     eq. (1) gives the angular accelerations (with its gyroscopic terms); eq. (2) with
     F_z = m g / (cos(roll) cos(pitch)) gives the horizontal acceleration, to which the external
     force adds; the speed is held to its limit. Returns the vehicles with new kinematics.
     """
     h = dt / substeps
+    b = p.setpoint_weight
     roll_ref, pitch_ref = attitude_setpoint(ax_cmd, ay_cmd, p.max_tilt)
     gyro_roll = (p.iyy - p.izz) / p.ixx
     gyro_pitch = (p.izz - p.ixx) / p.iyy
@@ -154,13 +169,39 @@ def quadrotor_step(v: Vehicles, ax_cmd: Tensor, ay_cmd: Tensor, fx: Tensor, fy: 
     fx, fy = fx / p.mass, fy / p.mass
     max_speed = p.max_speed
 
-    def substep(x, y, vx, vy, roll, pitch, yaw, droll, dpitch, dyaw, iroll, ipitch, iyaw,
-                cr, sr, cp, sp, cy, sy):  # fmt: skip
+    def substep(
+        x,
+        y,
+        vx,
+        vy,
+        roll,
+        pitch,
+        yaw,
+        droll,
+        dpitch,
+        dyaw,
+        iroll,
+        ipitch,
+        iyaw,
+        cr,
+        sr,
+        cp,
+        sp,
+        cy,
+        sy,
+    ):
         e_roll, e_pitch, e_yaw = roll_ref - roll, pitch_ref - pitch, -yaw
         # Eq. (1) with M / J from the PID (the inertia cancels).
-        acc_roll = gyro_roll * dpitch * dyaw + p.kp * e_roll + p.ki * iroll - p.kd * droll
-        acc_pitch = gyro_pitch * droll * dyaw + p.kp * e_pitch + p.ki * ipitch - p.kd * dpitch
-        acc_yaw = gyro_yaw * dpitch * droll + p.kp * e_yaw + p.ki * iyaw - p.kd * dyaw
+        acc_roll = (
+            gyro_roll * dpitch * dyaw + p.kp * (b * roll_ref - roll) + p.ki * iroll - p.kd * droll
+        )
+        acc_pitch = (
+            gyro_pitch * droll * dyaw
+            + p.kp * (b * pitch_ref - pitch)
+            + p.ki * ipitch
+            - p.kd * dpitch
+        )
+        acc_yaw = gyro_yaw * dpitch * droll - p.kp * yaw + p.ki * iyaw - p.kd * dyaw
         iroll, ipitch, iyaw = iroll + e_roll * h, ipitch + e_pitch * h, iyaw + e_yaw * h
         droll, dpitch, dyaw = droll + acc_roll * h, dpitch + acc_pitch * h, dyaw + acc_yaw * h
         roll, pitch, yaw = roll + droll * h, pitch + dpitch * h, yaw + dyaw * h
@@ -173,17 +214,50 @@ def quadrotor_step(v: Vehicles, ax_cmd: Tensor, ay_cmd: Tensor, fx: Tensor, fy: 
         ay = (-cy * sr + cr * sp * sy) * thrust_per_mass + fy
         vx, vy = clip_norm(vx + ax * h, vy + ay * h, max_speed)
         x, y = x + vx * h, y + vy * h
-        return (x, y, vx, vy, roll, pitch, yaw, droll, dpitch, dyaw, iroll, ipitch, iyaw,
-                cr, sr, cp, sp, cy, sy)  # fmt: skip
+        return (
+            x,
+            y,
+            vx,
+            vy,
+            roll,
+            pitch,
+            yaw,
+            droll,
+            dpitch,
+            dyaw,
+            iroll,
+            ipitch,
+            iyaw,
+            cr,
+            sr,
+            cp,
+            sp,
+            cy,
+            sy,
+        )
 
-    trig = (torch.cos(v.roll), torch.sin(v.roll), torch.cos(v.pitch), torch.sin(v.pitch),
-            torch.cos(v.yaw), torch.sin(v.yaw))  # fmt: skip
+    trig = (
+        torch.cos(v.roll),
+        torch.sin(v.roll),
+        torch.cos(v.pitch),
+        torch.sin(v.pitch),
+        torch.cos(v.yaw),
+        torch.sin(v.yaw),
+    )
     out = _repeat(substep, (*v[:13], *trig), substeps)
     return Vehicles(*out[:13], *v[13:])
 
 
-def point_mass_step(v: Vehicles, ax_cmd: Tensor, ay_cmd: Tensor, fx: Tensor, fy: Tensor,
-                    p: VehicleParams, dt: float, substeps: int) -> Vehicles:  # fmt: skip
+def point_mass_step(
+    v: Vehicles,
+    ax_cmd: Tensor,
+    ay_cmd: Tensor,
+    fx: Tensor,
+    fy: Tensor,
+    p: VehicleParams,
+    dt: float,
+    substeps: int,
+) -> Vehicles:
     """Advance point masses by one control step; arguments as :func:`quadrotor_step`."""
     h = dt / substeps
     ax, ay = ax_cmd + fx / p.mass, ay_cmd + fy / p.mass

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import secrets
 import warnings
-from typing import Any, Optional
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -34,18 +34,26 @@ class PursuitEvasionEnv:
     far, ``crashes`` (E,) pursuer crashes this episode, ``crashed`` (E, N) crashes this step,
     ``alive`` (E, N), ``distances`` (E, N) pursuer-evader distances (m), ``positions`` and
     ``velocities`` (E, N+1, 2) in m and m/s (pursuers, then the evader), ``evader_reward`` (E,),
-    ``evader_contact`` (E,) -- and what the policy sees next: ``obs_mask`` (E, N, N), ``state`` (E, N+1, 8) the global
-    state, ``history`` (E, n, N+1, 4) the last n frames of normalised [position, velocity],
-    ``evader_obs`` (E, N+1, 8); the same before auto-reset under ``final_obs``,
-    ``final_obs_mask``, ``final_state``, ``final_history``, ``final_evader_obs``.
+    ``evader_contact`` (E,) -- and what the policy sees next: ``obs_mask`` (E, N, N),
+    ``state`` (E, N+1, 8) the global state, ``history`` (E, n, N+1, 4) the last n frames of
+    normalised [position, velocity], ``evader_obs`` (E, N+1, 8); the same before auto-reset
+    under ``final_obs``, ``final_obs_mask``, ``final_state``, ``final_history``,
+    ``final_evader_obs``.
 
     The same seed gives the same trajectories, and environment ``i`` of a batch reset with seed
     ``s`` behaves exactly as a single environment reset with seed ``s + i``.
     """
 
-    def __init__(self, config: EnvConfig | dict[str, Any] | None = None, num_envs: int = 1,
-                 device: str | torch.device = "cpu", seed: Optional[int] = None, *,
-                 compile: bool = False, check_actions: bool = True) -> None:  # fmt: skip
+    def __init__(
+        self,
+        config: EnvConfig | dict[str, Any] | None = None,
+        num_envs: int = 1,
+        device: str | torch.device = "cpu",
+        seed: int | None = None,
+        *,
+        compile: bool = False,
+        check_actions: bool = True,
+    ) -> None:
         self.config = resolve_config(config)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ConfigError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -60,15 +68,16 @@ class PursuitEvasionEnv:
         # Auto-reset handles up to this many finished environments per pass (static shapes).
         self.reset_capacity = min(num_envs, max(8, num_envs // 32))
 
-        def step_fn(state: dict[str, Tensor], actions: Tensor, evader_action: Optional[Tensor]):
+        def step_fn(state: dict[str, Tensor], actions: Tensor, evader_action: Tensor | None):
             return scenario.step_core(sc, state, actions, evader_action)
 
         def reset_fn(state: dict[str, Tensor], views: dict[str, Tensor], pending: Tensor):
             return scenario.reset_pass(sc, state, views, pending, self.reset_capacity)
 
+        self.compiled = bool(compile)
         self._step_fn = _Fused(step_fn) if compile else step_fn
         self._reset_fn = _Fused(reset_fn) if compile else reset_fn
-        self.state: Optional[dict[str, Tensor]] = None
+        self.state: dict[str, Tensor] | None = None
 
     # --- facts about the environment ----------------------------------------------------------
     @property
@@ -96,7 +105,7 @@ class PursuitEvasionEnv:
         return (self.num_pursuers, 2)
 
     # --- the API --------------------------------------------------------------------------------
-    def reset(self, seed: Optional[int] = None) -> tuple[Tensor, dict[str, Tensor]]:
+    def reset(self, seed: int | None = None) -> tuple[Tensor, dict[str, Tensor]]:
         """Start a new episode in every environment.
 
         With ``seed``, environment ``i`` is re-keyed by ``seed + i``; without it, each
@@ -125,7 +134,7 @@ class PursuitEvasionEnv:
         }
         return views["obs"], info
 
-    def step(self, actions: Tensor, evader_actions: Optional[Tensor] = None):
+    def step(self, actions: Tensor, evader_actions: Tensor | None = None):
         """Advance every environment by one control step of ``config.dt`` seconds.
 
         Args:
@@ -141,7 +150,9 @@ class PursuitEvasionEnv:
         if self.config.evader_policy == "external":
             if evader_actions is None:
                 raise ActionError("evader_policy is 'external': pass evader_actions to step()")
-            evader_actions = self._check_actions(evader_actions, (self.num_envs, 2), "evader_actions")
+            evader_actions = self._check_actions(
+                evader_actions, (self.num_envs, 2), "evader_actions"
+            )
         elif evader_actions is not None:
             raise ActionError(
                 f"evader_policy is '{self.config.evader_policy}': set evader_policy='external' "
@@ -265,15 +276,21 @@ class _Fused:
             try:
                 return self.fused(*args)
             except Exception as exc:  # noqa: BLE001 - a broken compiler means "run eagerly"
-                warnings.warn(f"torch.compile failed ({type(exc).__name__}: {exc}); "
-                              "running eagerly", stacklevel=3)  # fmt: skip
+                warnings.warn(
+                    f"torch.compile failed ({type(exc).__name__}: {exc}); running eagerly",
+                    stacklevel=3,
+                )
                 self.failed = True
         return self.eager(*args)
 
 
-def make_env(config: EnvConfig | dict[str, Any] | None = None, num_envs: int = 1,
-             device: str | torch.device = "cpu", seed: Optional[int] = None,
-             **options: Any) -> PursuitEvasionEnv:  # fmt: skip
+def make_env(
+    config: EnvConfig | dict[str, Any] | None = None,
+    num_envs: int = 1,
+    device: str | torch.device = "cpu",
+    seed: int | None = None,
+    **options: Any,
+) -> PursuitEvasionEnv:
     """A batch of ``num_envs`` pursuit-evasion environments on ``device``.
 
     ``config`` is an :class:`EnvConfig`, a dict of its keys, or None for the defaults.

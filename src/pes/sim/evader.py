@@ -9,7 +9,7 @@ tensors in [-1, 1]: a desired acceleration as a fraction of the evader's maximum
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torch import Tensor
@@ -29,19 +29,30 @@ class FleeEvader:
 
     The "away" vector sums unit vectors from each alive pursuer to the evader, weighted by
     (threat_radius / d)^2 (the nearest pursuers count most, far ones barely), plus a push from
-    the nearest obstacle within ``wall_influence``. Along each of ``num_rays`` headings the evader can fly ``free`` metres
-    before coming within ``margin`` of a building or wall (a ray cast, capped at
-    ``lookahead``). Each heading scores its agreement with "away", the open space ahead, and --
-    so that dead ends and corners score low -- how far the end of its free segment lies from the
-    nearest pursuer extrapolated to the time the evader gets there. The evader flies the best
-    heading at full speed, braking only before a near obstacle. This beats a single pursuer
-    (the evader is faster) but can be cornered by several.
+    the nearest obstacle within ``wall_influence``. Along each of ``num_rays`` headings the
+    evader can fly ``free`` metres before coming within ``margin`` of a building or wall (a ray
+    cast, capped at ``lookahead``). Each heading scores its agreement with "away", the open
+    space ahead, and -- so that dead ends and corners score low -- how far the end of its free
+    segment lies from the nearest pursuer extrapolated to the time the evader gets there. The
+    evader flies the best heading at full speed, braking only before a near obstacle. This
+    beats a single pursuer (the evader is faster) but can be cornered by several.
     """
 
-    def __init__(self, boxes: Tensor, arena: Tensor, max_speed: float, max_accel: float,
-                 margin: float, num_rays: int = 16, lookahead: float = 15.0,
-                 open_space: float = 0.3, escape: float = 1.0, threat_radius: float = 15.0,
-                 wall_influence: float = 5.0, wall_repulsion: float = 1.0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        boxes: Tensor,
+        arena: Tensor,
+        max_speed: float,
+        max_accel: float,
+        margin: float,
+        num_rays: int = 16,
+        lookahead: float = 15.0,
+        open_space: float = 0.3,
+        escape: float = 1.0,
+        threat_radius: float = 15.0,
+        wall_influence: float = 5.0,
+        wall_repulsion: float = 1.0,
+    ) -> None:
         angles = torch.arange(num_rays, dtype=torch.float32, device=boxes.device)
         angles = angles * (2 * math.pi / num_rays)
         self.directions = torch.stack([torch.cos(angles), torch.sin(angles)], -1)  # (M, 2)
@@ -69,8 +80,9 @@ class FleeEvader:
         away_x = away_x - self.wall_repulsion * push * v.obstacle_dx[:, -1]
         away_y = away_y - self.wall_repulsion * push * v.obstacle_dy[:, -1]
 
-        free = ray_distance(ex, ey, self.directions, self.boxes, self.arena, self.margin,
-                            self.lookahead)  # (E, M) fmt: skip
+        free = ray_distance(
+            ex, ey, self.directions, self.boxes, self.arena, self.margin, self.lookahead
+        )  # (E, M)
         ux, uy = self.directions[:, 0], self.directions[:, 1]  # (M,)
         # Where each heading leads, against where the pursuers will be by then: (E, M, N).
         t = (free / self.max_speed).unsqueeze(-1)  # (E, M, 1)

@@ -12,8 +12,9 @@ import torch
 from torch import Tensor
 
 
-def nearest_obstacle_xy(px: Tensor, py: Tensor, boxes: Tensor,
-                        arena: Tensor) -> tuple[Tensor, Tensor, Tensor]:  # fmt: skip
+def nearest_obstacle_xy(
+    px: Tensor, py: Tensor, boxes: Tensor, arena: Tensor
+) -> tuple[Tensor, Tensor, Tensor]:
     """Signed distance and surface normal of the nearest obstacle, on separate components.
 
     Args:
@@ -64,8 +65,9 @@ def nearest_obstacle_xy(px: Tensor, py: Tensor, boxes: Tensor,
     return dist, nx, ny
 
 
-def obstacle_distances_xy(px: Tensor, py: Tensor, boxes: Tensor,
-                          arena: Tensor) -> tuple[Tensor, Tensor, Tensor]:  # fmt: skip
+def obstacle_distances_xy(
+    px: Tensor, py: Tensor, boxes: Tensor, arena: Tensor
+) -> tuple[Tensor, Tensor, Tensor]:
     """Signed distance and outward normal of every obstacle: the B buildings, then the four
     walls (left, right, bottom, top).
 
@@ -93,8 +95,11 @@ def obstacle_distances_xy(px: Tensor, py: Tensor, boxes: Tensor,
     wall_dist = torch.cat([px, arena[0] - px, py, arena[1] - py], dim=-1)
     wall_nx = torch.cat([one, -one, zero, zero], dim=-1)
     wall_ny = torch.cat([zero, zero, one, -one], dim=-1)
-    return (torch.cat([dist, wall_dist], -1), torch.cat([nx, wall_nx], -1),
-            torch.cat([ny, wall_ny], -1))  # fmt: skip
+    return (
+        torch.cat([dist, wall_dist], -1),
+        torch.cat([nx, wall_nx], -1),
+        torch.cat([ny, wall_ny], -1),
+    )
 
 
 def nearest_obstacle(pos: Tensor, boxes: Tensor, arena: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -105,8 +110,15 @@ def nearest_obstacle(pos: Tensor, boxes: Tensor, arena: Tensor) -> tuple[Tensor,
     return dist, pos - normal * dist.unsqueeze(-1), normal
 
 
-def ray_distance(ox: Tensor, oy: Tensor, directions: Tensor, boxes: Tensor, arena: Tensor,
-                 margin: float, max_distance: float) -> Tensor:  # fmt: skip
+def ray_distance(
+    ox: Tensor,
+    oy: Tensor,
+    directions: Tensor,
+    boxes: Tensor,
+    arena: Tensor,
+    margin: float,
+    max_distance: float,
+) -> Tensor:
     """Free distance along rays before they come within ``margin`` of an obstacle.
 
     Args:
@@ -143,8 +155,10 @@ def ray_distance(ox: Tensor, oy: Tensor, directions: Tensor, boxes: Tensor, aren
         # A ray that starts inside a grown box is blocked at once if it heads towards the box's
         # centre, and not blocked by that box if it heads away (it is leaving the margin).
         inside = t_enter < 0.0
-        towards = (dx[:, None] * ((boxes[:, 0] + boxes[:, 2]) * 0.5 - ox3)
-                   + dy[:, None] * ((boxes[:, 1] + boxes[:, 3]) * 0.5 - oy3)) > 0  # fmt: skip
+        towards = (
+            dx[:, None] * ((boxes[:, 0] + boxes[:, 2]) * 0.5 - ox3)
+            + dy[:, None] * ((boxes[:, 1] + boxes[:, 3]) * 0.5 - oy3)
+        ) > 0
         hit = hit & (~inside | towards)
         t_hit = torch.where(hit, t_enter.clamp(min=0.0), max_distance)
         dist = torch.minimum(dist, t_hit.amin(dim=-1))

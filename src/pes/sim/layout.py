@@ -77,8 +77,12 @@ def grid_layout(config: EnvConfig) -> Layout:
             ymax = y0 + row * pitch + config.block_size - shrink[3]
             if xmax - xmin > 0.5 and ymax - ymin > 0.5:
                 boxes.append([xmin, ymin, xmax, ymax])
-    return Layout(config.arena_width, config.arena_height, np.array(boxes).reshape(-1, 4),
-                  _heights(len(boxes), config, rng))  # fmt: skip
+    return Layout(
+        config.arena_width,
+        config.arena_height,
+        np.array(boxes).reshape(-1, 4),
+        _heights(len(boxes), config, rng),
+    )
 
 
 def _ascii_boxes(lines: list[str], width: float, height: float) -> list[list[float]]:

@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import Tensor
+from torch.nn.functional import softplus
 
 from pes.errors import ConfigError
 from pes.sim import rng
@@ -115,7 +115,7 @@ class Scenario:
     evader_cells: Tensor  # (Me, 2) centres of free start cells for the evader, m
     other_index: Tensor  # (N, N) row k of pursuer i's observation shows pursuer other_index[i, k]
     vel_scale: float  # pursuer max speed, m/s: velocity normaliser of observations
-    evader_policy: Optional[EvaderPolicy] = field(default=None)
+    evader_policy: EvaderPolicy | None = field(default=None)
 
     @property
     def num_pursuers(self) -> int:
@@ -162,7 +162,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
     def per_vehicle(pursuer: float, evader: float) -> Tensor:
         return torch.tensor([pursuer] * n + [evader], dtype=torch.float32, device=device)
 
-    kp, ki, kd = attitude_gains(config.attitude_bandwidth, config.attitude_damping)
+    kp, ki, kd, weight = attitude_gains(config.attitude_bandwidth, config.attitude_damping)
     params = VehicleParams(
         mass=per_vehicle(config.pursuer_mass, config.evader_mass),
         max_speed=per_vehicle(config.pursuer_max_speed, config.evader_max_speed),
@@ -173,6 +173,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
         kp=kp,
         ki=ki,
         kd=kd,
+        setpoint_weight=weight,
         max_tilt=math.radians(config.max_tilt_deg),
     )
     others = torch.tensor(
@@ -194,9 +195,12 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
     )
     if config.evader_policy == "flee":
         scenario.evader_policy = FleeEvader(
-            boxes, arena, config.evader_max_speed, config.evader_max_accel,
+            boxes,
+            arena,
+            config.evader_max_speed,
+            config.evader_max_accel,
             margin=config.body_radius + 0.7,
-        )  # fmt: skip
+        )
     elif config.evader_policy == "random":
         scenario.evader_policy = RandomEvader()
     return scenario
@@ -231,9 +235,18 @@ def observe(sc: Scenario, v: Vehicles, f: Flags) -> dict[str, Tensor]:
     qx, qy = v.obstacle_dx / width, v.obstacle_dy / height
     to_ex, to_ey = px[:, n:] - px[:, :n], py[:, n:] - py[:, :n]  # (E, N)
     rows = torch.stack(
-        [px[:, :n], py[:, :n], v.vx[:, :n] / vscale, v.vy[:, :n] / vscale,
-         qx[:, :n], qy[:, :n], to_ex, to_ey], dim=-1,
-    )  # (E, N, 8) fmt: skip
+        [
+            px[:, :n],
+            py[:, :n],
+            v.vx[:, :n] / vscale,
+            v.vy[:, :n] / vscale,
+            qx[:, :n],
+            qy[:, :n],
+            to_ex,
+            to_ey,
+        ],
+        dim=-1,
+    )  # (E, N, 8)
     picked = rows[:, sc.other_index]  # (E, N, N, 8)
     # Rows k >= 1 hold position and velocity relative to pursuer i.
     is_self = torch.arange(n, device=rows.device) == 0
@@ -245,23 +258,53 @@ def observe(sc: Scenario, v: Vehicles, f: Flags) -> dict[str, Tensor]:
     alive_f = alive.unsqueeze(-1).to(rows.dtype)
     zero = torch.zeros_like(px[:, -1])
     evader_row = torch.stack(
-        [px[:, -1], py[:, -1], v.vx[:, -1] / vscale, v.vy[:, -1] / vscale,
-         qx[:, -1], qy[:, -1], zero, zero], dim=-1,
-    )  # fmt: skip
+        [
+            px[:, -1],
+            py[:, -1],
+            v.vx[:, -1] / vscale,
+            v.vy[:, -1] / vscale,
+            qx[:, -1],
+            qy[:, -1],
+            zero,
+            zero,
+        ],
+        dim=-1,
+    )
     global_state = torch.cat([rows * alive_f, evader_row[:, None]], dim=1)
 
     e_vscale = sc.config.evader_max_speed
     gap = (to_ex * to_ex + to_ey * to_ey).masked_fill(~alive, float("inf"))
     nearest = gap.argmin(dim=-1, keepdim=True)  # (E, 1)
     e_self = torch.stack(
-        [px[:, -1], py[:, -1], v.vx[:, -1] / e_vscale, v.vy[:, -1] / e_vscale, qx[:, -1],
-         qy[:, -1], -to_ex.gather(1, nearest)[:, 0], -to_ey.gather(1, nearest)[:, 0]], dim=-1,
-    )  # fmt: skip
+        [
+            px[:, -1],
+            py[:, -1],
+            v.vx[:, -1] / e_vscale,
+            v.vy[:, -1] / e_vscale,
+            qx[:, -1],
+            qy[:, -1],
+            -to_ex.gather(1, nearest)[:, 0],
+            -to_ey.gather(1, nearest)[:, 0],
+        ],
+        dim=-1,
+    )
     zeros = torch.zeros_like(px[:, :n])
-    e_rows = torch.stack(
-        [-to_ex, -to_ey, (v.vx[:, :n] - v.vx[:, n:]) / e_vscale,
-         (v.vy[:, :n] - v.vy[:, n:]) / e_vscale, qx[:, :n], qy[:, :n], zeros, zeros], dim=-1,
-    ) * alive_f  # fmt: skip
+    e_rows = (
+        torch.stack(
+            [
+                -to_ex,
+                -to_ey,
+                (v.vx[:, :n] - v.vx[:, n:]) / e_vscale,
+                (v.vy[:, :n] - v.vy[:, n:]) / e_vscale,
+                qx[:, :n],
+                qy[:, :n],
+                zeros,
+                zeros,
+            ],
+            dim=-1,
+        )
+        * alive_f
+    )
     evader_obs = torch.cat([e_self[:, None], e_rows], dim=1)
     return {"obs": obs, "obs_mask": mask, "state": global_state, "evader_obs": evader_obs}
 
@@ -348,11 +391,12 @@ def _disturbance(sc: Scenario, c: Counters) -> tuple[Tensor, Tensor]:
 def softplus_obstacle_term(obstacle_dist: Tensor, safe_distance: float, k: float) -> Tensor:
     """k * log(exp(0) + exp((d_safe - d_obs) / k)) of eq. (9), computed without overflow for
     any distance (also negative, inside a wall); (...) in metres."""
-    return F.softplus((safe_distance - obstacle_dist) / k) * k
+    return softplus((safe_distance - obstacle_dist) / k) * k
 
 
-def advance(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
-            evader_action: Optional[Tensor]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:  # fmt: skip
+def advance(
+    sc: Scenario, state: dict[str, Tensor], actions: Tensor, evader_action: Tensor | None
+) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     """One control step of every environment, without auto-reset.
 
     Args:
@@ -387,8 +431,12 @@ def advance(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
     dynamics = quadrotor_step if cfg.dynamics == "quadrotor" else point_mass_step
     moved = dynamics(v, ax, ay, fx, fy, p, cfg.dt, cfg.physics_substeps)
     # Dead pursuers stay where they fell, at rest.
-    moved = Vehicles(*(torch.where(active, new, old if i < 2 else 0.0)
-                       for i, (new, old) in enumerate(zip(moved, v))))  # fmt: skip
+    moved = Vehicles(
+        *(
+            torch.where(active, new, old if i < 2 else 0.0)
+            for i, (new, old) in enumerate(zip(moved, v))
+        )
+    )
 
     # Collisions with buildings and walls: push out of the obstacle along its normal.
     dist, nx, ny = nearest_obstacle_xy(moved.x, moved.y, sc.boxes, sc.arena)
@@ -404,8 +452,9 @@ def advance(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
     slide = contact & ~is_pursuer
     vx = torch.where(stop, 0.0, torch.where(slide, moved.vx - inward * nx, moved.vx))
     vy = torch.where(stop, 0.0, torch.where(slide, moved.vy - inward * ny, moved.vy))
-    moved = moved._replace(x=x, y=y, vx=vx, vy=vy, obstacle_dist=dist, obstacle_dx=-nx * dist,
-                           obstacle_dy=-ny * dist)  # fmt: skip
+    moved = moved._replace(
+        x=x, y=y, vx=vx, vy=vy, obstacle_dist=dist, obstacle_dx=-nx * dist, obstacle_dy=-ny * dist
+    )
     alive = alive0 & ~crashed if cfg.crash_mode == "disable" else alive0
 
     step = c.step + 1
@@ -427,9 +476,11 @@ def advance(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
     obstacle_term = softplus_obstacle_term(dist[:, :n], cfg.safe_distance, cfg.softplus_k)
     r_self = -(cfg.self_weight * rho * distances + obstacle_term)
     reward = (
-        r_co + r_self + cfg.crash_reward * crashed.to(x.dtype)
+        r_co
+        + r_self
+        + cfg.crash_reward * crashed.to(x.dtype)
         + cfg.capture_reward * success.unsqueeze(-1).to(x.dtype)
-    ) * alive0_f  # fmt: skip
+    ) * alive0_f
     nearest_gap = torch.where(alive0, distances, float("inf")).amin(-1)
     nearest_gap = torch.where(alive0.any(-1), nearest_gap, 0.0)
     evader_reward = (
@@ -462,8 +513,9 @@ def advance(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
     return stepped, out
 
 
-def step_core(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
-              evader_action: Optional[Tensor]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:  # fmt: skip
+def step_core(
+    sc: Scenario, state: dict[str, Tensor], actions: Tensor, evader_action: Tensor | None
+) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     """:func:`advance` followed by :func:`observe` of the stepped state (no reset yet).
 
     Returns the stepped state and the outputs of :func:`advance` plus the views of
@@ -475,8 +527,9 @@ def step_core(sc: Scenario, state: dict[str, Tensor], actions: Tensor,
     return stepped, out
 
 
-def reset_pass(sc: Scenario, state: dict[str, Tensor], views: dict[str, Tensor], pending: Tensor,
-               capacity: int) -> Tensor:  # fmt: skip
+def reset_pass(
+    sc: Scenario, state: dict[str, Tensor], views: dict[str, Tensor], pending: Tensor, capacity: int
+) -> Tensor:
     """Auto-reset, in place: start the next episode of up to ``capacity`` of the ``pending``
     (E,) environments, overwriting their rows of ``state`` and of ``views`` (the observation
     tensors of :func:`observe`).

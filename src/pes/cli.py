@@ -1,0 +1,363 @@
+"""The ``pes`` command: a thin layer over the library.
+
+Every sub-command has ``--help``; with ``--json`` it prints exactly one JSON object on stdout
+(progress goes to stderr). A user mistake ends with a one-line ``error: ...`` on stderr and exit
+status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from pes import __version__
+from pes.config import load_yaml, parse_override
+from pes.errors import ConfigError, PESError
+from pes.sim.config import EnvConfig
+
+EXIT_USER_ERROR = 2
+
+
+# --- shared options ------------------------------------------------------------------------
+
+
+def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("scenario")
+    group.add_argument("--config", metavar="F.yaml", help="EnvConfig values from a YAML file")
+    group.add_argument(
+        "--set",
+        metavar="KEY=VALUE",
+        action="append",
+        default=[],
+        dest="overrides",
+        help="override one EnvConfig key (repeatable), e.g. "
+        "--set num_pursuers=8 --set dynamics=point_mass",
+    )
+
+
+def _scenario(args: argparse.Namespace, **defaults: Any) -> EnvConfig:
+    """The EnvConfig of ``--config`` and ``--set`` on top of ``defaults``."""
+    values: dict[str, Any] = dict(defaults)
+    if args.config:
+        values.update(load_yaml(args.config))
+    for text in args.overrides:
+        key, value = parse_override(text)
+        values[key] = value
+    return EnvConfig.from_dict(values)
+
+
+def _print_json(obj: dict[str, Any]) -> None:
+    print(json.dumps(obj, indent=2, default=str))
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    """Human-readable output, silenced by --json."""
+    if not getattr(args, "json", False):
+        print(text)
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+# --- policies --------------------------------------------------------------------------------
+
+
+def make_policy(name: str, config: EnvConfig, seed: int = 0):
+    """The pursuer policy called ``name`` for the scenario ``config``."""
+    from pes.policies import SCRIPTED
+
+    if name in SCRIPTED:
+        return SCRIPTED[name](config, seed=seed)
+    known = ", ".join(SCRIPTED)
+    raise ConfigError(f"unknown policy '{name}' (available: {known})")
+
+
+def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "cpu"):
+    """One recorded episode of ``policy_name``: returns the episode record."""
+    from pes.record import EpisodeRecorder
+    from pes.sim.env import make_env
+
+    env = make_env(config, num_envs=1, device=device, seed=seed)
+    policy = make_policy(policy_name, config, seed=seed)
+    obs, info = env.reset(seed=seed)
+    recorder = EpisodeRecorder(env)
+    recorder.start()
+    with torch.no_grad():
+        while not recorder.finished:
+            obs, _, _, _, info = env.step(policy(obs, info))
+            recorder.add(info)
+    return recorder.record()
+
+
+# --- commands --------------------------------------------------------------------------------
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from pes.record import save_gif, save_record
+
+    start = time.time()
+    config = _scenario(args, disturbance=True, crash_mode="disable")
+    out = Path(args.out)
+    record = _run_episode(config, args.policy, args.seed)
+    record_path = save_record(record, out / "episode.json")
+    gif_path = save_gif(record, out / "episode.gif", every=2)
+    outcome = record["outcome"]
+    summary = {
+        "policy": args.policy,
+        "evader": config.evader_policy,
+        "seed": args.seed,
+        "success": outcome["success"],
+        "steps": outcome["steps"],
+        "crashes": outcome["crashes"],
+        "gif": str(gif_path),
+        "record": str(record_path),
+        "seconds": round(time.time() - start, 2),
+    }
+    if args.json:
+        _print_json(summary)
+    else:
+        verdict = "captured the evader" if outcome["success"] else "did not capture the evader"
+        print(
+            f"{config.num_pursuers} {args.policy} pursuers {verdict} in {outcome['steps']} "
+            f"steps ({outcome['steps'] * config.dt:.1f} s) with {outcome['crashes']} crashes "
+            f"(evader: {config.evader_policy}, seed {args.seed})."
+        )
+        print(f"GIF:    {gif_path}\nrecord: {record_path}   (view it: pes view {record_path})")
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from pes.evaluate import evaluate
+
+    defaults: dict[str, Any] = {"crash_mode": "disable"}
+    if args.disturbance:
+        defaults["disturbance"] = True
+    if args.damaged is not None:
+        defaults["damaged"] = args.damaged
+    config = _scenario(args, **defaults)
+    policy = make_policy(args.policy, config, seed=args.seed)
+    start = time.time()
+    result = evaluate(
+        policy,
+        config,
+        episodes=args.episodes,
+        num_envs=args.num_envs,
+        seed=args.seed,
+        device=args.device,
+        progress=not args.json,
+    )
+    summary = {
+        "policy": args.policy,
+        **result.summary(),
+        "damaged": config.damaged,
+        "disturbance": config.disturbance,
+        "crash_mode": config.crash_mode,
+        "evader": config.evader_policy,
+        "seconds": round(time.time() - start, 2),
+    }
+    if args.json:
+        _print_json(summary)
+    else:
+        print(
+            f"{args.policy}: success {100 * result.success_rate:.1f} % "
+            f"(± {100 * result.success_rate_ci95:.1f}), mean steps {result.mean_steps:.1f}, "
+            f"average reward {result.mean_reward:.3f}, crashes/episode "
+            f"{result.mean_crashes:.2f} over {result.episodes} episodes"
+        )
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from pes.record import save_gif, save_record
+
+    out = Path(args.out)
+    suffix = out.suffix.lower()
+    if suffix not in (".gif", ".json"):
+        raise ConfigError(f"--out must end in .gif or .json, got '{out.name}'")
+    config = _scenario(args, crash_mode="disable")
+    written = []
+    for k in range(args.episodes):
+        record = _run_episode(config, args.policy, args.seed + k)
+        path = out if args.episodes == 1 else out.with_name(f"{out.stem}_{k}{out.suffix}")
+        if suffix == ".gif":
+            save_gif(record, path, every=args.every)
+        else:
+            save_record(record, path)
+        written.append(
+            {
+                "path": str(path),
+                **{k2: record["outcome"][k2] for k2 in ("success", "steps", "crashes")},
+            }
+        )
+        _say(
+            args,
+            f"wrote {path} (success={record['outcome']['success']}, "
+            f"steps={record['outcome']['steps']})",
+        )
+    if args.json:
+        _print_json({"files": written})
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from pes.sim.bench import run_benchmark
+
+    config = _scenario(args)
+    results = run_benchmark(
+        config,
+        args.num_envs,
+        device=args.device,
+        steps=args.steps,
+        compile=args.compile,
+        log=None if args.json else print,
+    )
+    if args.json:
+        _print_json(results)
+    return 0
+
+
+# --- the parser ------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pes",
+        description="PES: multi-quadcopter pursuit-evasion (Game of Drones, TNNLS 2022).",
+    )
+    parser.add_argument("--version", action="version", version=f"pes {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    p = sub.add_parser(
+        "demo",
+        help="one episode of the best shipped policy: GIF + record",
+        description="Run one episode of the best shipped policy on the default "
+        "map (with disturbance, crash_mode=disable), write a GIF and an episode "
+        "record, and print a summary. No training, no network.",
+    )
+    p.add_argument("--out", default="pes-demo", help="output folder (default: pes-demo)")
+    p.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    p.add_argument("--policy", default="pid-pf", help=argparse.SUPPRESS)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_scenario_options(p)
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser(
+        "eval",
+        help="evaluate a policy over many episodes",
+        description="Evaluate pursuer policy over N episodes (crash_mode=disable "
+        "unless set otherwise). Prints success rate, mean episode steps and "
+        "average reward.",
+    )
+    p.add_argument("--policy", required=True, help="pid-pf or random")
+    p.add_argument("--episodes", type=_positive, default=100, help="episodes (default: 100)")
+    p.add_argument(
+        "--damaged",
+        type=_non_negative,
+        default=None,
+        help="disable K random pursuers in every episode (anti-damage test)",
+    )
+    p.add_argument(
+        "--disturbance",
+        action="store_true",
+        help="random 5 %% weight pushes (the paper's evaluation setting)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the first environment")
+    p.add_argument(
+        "--num-envs",
+        type=_positive,
+        default=100,
+        help="environments stepped together (default: 100)",
+    )
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_scenario_options(p)
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser(
+        "render",
+        help="record episodes as GIF or JSON",
+        description="Record episodes of a policy to FILE.gif (top-down "
+        "animation) or FILE.json (episode record, for pes view).",
+    )
+    p.add_argument("--policy", required=True, help="pid-pf or random")
+    p.add_argument("--out", required=True, metavar="FILE", help="FILE.gif or FILE.json")
+    p.add_argument(
+        "--episodes",
+        type=_positive,
+        default=1,
+        help="episodes to record; more than one writes FILE_0, FILE_1, ...",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    p.add_argument(
+        "--every", type=_positive, default=2, help="GIF: draw every K-th step (default: 2)"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_scenario_options(p)
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser(
+        "bench",
+        help="simulator throughput in env-steps/s",
+        description="Measure simulator throughput (env-steps/s) with random "
+        "pursuer actions, after a warm-up, at each --num-envs.",
+    )
+    p.add_argument(
+        "--num-envs",
+        type=_positive,
+        nargs="+",
+        default=[1, 64, 1024],
+        help="batch sizes (default: 1 64 1024)",
+    )
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    p.add_argument("--steps", type=_positive, default=200, help="timed steps per size")
+    p.add_argument(
+        "--compile",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="fuse the step with torch.compile (default: on)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_scenario_options(p)
+    p.set_defaults(func=cmd_bench)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except PESError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

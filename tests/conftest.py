@@ -1,0 +1,32 @@
+"""Shared fixtures: small scenarios that run in seconds."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import pes
+
+
+@pytest.fixture(autouse=True)
+def _threads():
+    torch.set_num_threads(2)
+    yield
+
+
+@pytest.fixture
+def small_config() -> pes.EnvConfig:
+    """A short-episode scenario for fast tests."""
+    return pes.EnvConfig(max_steps=60).validate()
+
+
+def set_vehicles(env: pes.PursuitEvasionEnv, **fields: torch.Tensor) -> None:
+    """Overwrite vehicle fields (each (E, A)) of ``env``'s state, then refresh obstacle data."""
+    from pes.sim import scenario
+    from pes.sim.geometry import nearest_obstacle_xy
+
+    v, c, f = scenario.unpack(env.state)
+    v = v._replace(**{k: t.to(env.device).float() for k, t in fields.items()})
+    dist, nx, ny = nearest_obstacle_xy(v.x, v.y, env.scenario.boxes, env.scenario.arena)
+    v = v._replace(obstacle_dist=dist, obstacle_dx=-nx * dist, obstacle_dy=-ny * dist)
+    env.state = scenario.pack(v, c, f, env.state["history"])

@@ -1,0 +1,262 @@
+"""Physics units: attitude loop, limits, collisions, the obstacle term, geometry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import pes
+from pes.sim.dynamics import Vehicles, attitude_gains, quadrotor_step
+from pes.sim.geometry import nearest_obstacle, ray_distance
+from pes.sim.scenario import softplus_obstacle_term
+from tests.conftest import set_vehicles
+
+
+def _vehicles(num_envs: int, num_vehicles: int, x: float = 50.0, y: float = 50.0) -> Vehicles:
+    zero = torch.zeros(num_envs, num_vehicles)
+    return Vehicles(zero + x, zero + y, *([zero] * 14))
+
+
+def test_attitude_gains_place_the_poles():
+    kp, ki, kd, b = attitude_gains(30.0, 1.0, 0.1)
+    roots = np.roots([1.0, kd, kp, ki])
+    assert sorted(np.round(roots.real, 6)) == pytest.approx([-30.0, -30.0, -3.0], abs=1e-3)
+    assert b == pytest.approx(1 / 1.2)
+
+
+def test_achieved_acceleration_tracks_a_step_command():
+    """Step response of the cascaded attitude loop (docs/scenario.md documents it)."""
+    env = pes.make_env({"layout": "empty"}, seed=0)
+    params = env.scenario.params
+    v = _vehicles(1, 6)
+    zero = torch.zeros(1, 6)
+    command = torch.full((1, 6), 4.0)
+    accel = []
+    for _ in range(60):  # 0.6 s in 10 ms sub-steps
+        before = v.vx.clone()
+        v = quadrotor_step(v, command, zero, zero, zero, params, 0.01, 1)
+        accel.append(float((v.vx - before)[0, 0] / 0.01))
+    accel = np.array(accel)
+    rise = np.argmax(accel >= 0.9 * 4.0) * 0.01
+    assert 0.05 <= rise <= 0.2, f"90 % rise time {rise:.2f} s"
+    assert accel.max() <= 4.0 * 1.01, "no more than 1 % overshoot"
+    assert accel[-10:] == pytest.approx(4.0, rel=0.01)
+    assert abs(float(v.vy[0, 0])) < 1e-6 and abs(float(v.yaw[0, 0])) < 1e-6
+
+
+def test_lateral_command_rolls_the_right_way():
+    env = pes.make_env({"layout": "empty"}, seed=0)
+    v = _vehicles(1, 6)
+    zero = torch.zeros(1, 6)
+    for _ in range(50):
+        v = quadrotor_step(
+            v, zero, torch.full((1, 6), 3.0), zero, zero, env.scenario.params, 0.01, 1
+        )
+    assert float(v.vy[0, 0]) > 0.5 and float(v.roll[0, 0]) < 0  # y'' = -g tan(roll)
+
+
+@pytest.mark.parametrize("dynamics", ["quadrotor", "point_mass"])
+def test_limits_hold_over_long_random_rollouts(dynamics):
+    cfg = pes.EnvConfig(dynamics=dynamics, crash_mode="continue", max_steps=400).validate()
+    env = pes.make_env(cfg, num_envs=16, seed=3)
+    env.reset()
+    gen = torch.Generator().manual_seed(0)
+    vmax = torch.tensor([cfg.pursuer_max_speed] * 5 + [cfg.evader_max_speed])
+    amax = torch.tensor([cfg.pursuer_max_accel] * 5 + [cfg.evader_max_accel])
+    prev = env.velocities.clone()
+    for _ in range(400):
+        actions = torch.rand(16, 5, 2, generator=gen) * 4 - 2  # also out of range: clipped
+        _, _, term, trunc, info = env.step(actions)
+        vel = info["velocities"]
+        assert (vel.norm(dim=-1) <= vmax * (1 + 1e-5)).all()
+        ok = ~(term | trunc) & ~info["crashed"].any(-1) & ~info["evader_contact"]
+        accel = (vel - prev).norm(dim=-1) / cfg.dt  # average over the step
+        assert (accel[ok] <= amax * 1.01).all()
+        prev = env.velocities.clone()
+        pos = info["positions"]
+        assert (pos >= 0).all() and (pos[..., 0] <= 100).all() and (pos[..., 1] <= 100).all()
+        assert (info["state"].isfinite()).all()
+
+
+def test_disturbance_pushes_but_limits_hold():
+    cfg = pes.EnvConfig(disturbance=True, disturbance_prob=1.0, layout="empty").validate()
+    env = pes.make_env(cfg, num_envs=64, seed=0)
+    env.reset()
+    zero = torch.zeros(64, 5, 2)
+    for _ in range(10):
+        _, _, _, _, info = env.step(zero)
+    speed = info["velocities"][:, :5].norm(dim=-1)
+    # Without any command the 5 % weight pushes move the pursuers, a little.
+    assert (speed > 0.05).float().mean() > 0.9 and (speed < 1.5).all()
+
+
+def _pursuer_into_wall(crash_mode: str):
+    cfg = pes.EnvConfig(layout="empty", crash_mode=crash_mode, dynamics="point_mass")
+    env = pes.make_env(cfg, num_envs=1, seed=0)
+    env.reset()
+    x = torch.tensor([[0.9, 30.0, 40.0, 60.0, 70.0, 50.0]])
+    y = torch.tensor([[50.0, 20.0, 30.0, 40.0, 60.0, 50.0]])
+    vx = torch.tensor([[-8.0, 0, 0, 0, 0, 0]])
+    set_vehicles(env, x=x, y=y, vx=vx, vy=torch.zeros(1, 6))
+    action = torch.zeros(1, 5, 2)
+    action[0, 0, 0] = -1.0
+    return env, action
+
+
+def test_crash_continue_pushes_out_and_stops():
+    env, action = _pursuer_into_wall("continue")
+    _, reward, _, _, info = env.step(action)
+    assert bool(info["crashed"][0, 0]) and int(info["crashes"][0]) == 1
+    assert bool(info["alive"][0, 0])
+    assert float(env.positions[0, 0, 0]) == pytest.approx(0.3 + 1e-3, abs=1e-4)
+    assert env.velocities[0, 0].abs().max() < 1e-6
+    assert float(reward[0, 0]) < -2.0  # crash -2, plus the distance and obstacle terms
+    _, reward, _, _, info = env.step(torch.zeros(1, 5, 2))
+    assert not bool(info["crashed"][0, 0])  # it flies on
+
+
+def test_crash_disable_damages_for_good():
+    env, action = _pursuer_into_wall("disable")
+    obs, reward, _, _, info = env.step(action)
+    assert bool(info["crashed"][0, 0]) and not bool(info["alive"][0, 0])
+    assert float(reward[0, 0]) < -2.0
+    mask = info["obs_mask"][0]
+    assert not mask[0].any()  # its own observation is masked
+    assert not mask[1:, 1].any()  # it is masked out of every other pursuer's input
+    assert obs[0, 0].abs().max() == 0 and obs[0, 1:, 1].abs().max() == 0
+    where = env.positions[0, 0].clone()
+    obs, reward, _, _, info = env.step(torch.ones(1, 5, 2))
+    assert torch.equal(env.positions[0, 0], where) and float(reward[0, 0]) == 0.0
+    assert not bool(info["crashed"][0, 0])
+
+
+def test_evader_stops_at_the_surface_without_damage():
+    cfg = pes.EnvConfig(layout="empty", evader_policy="external", dynamics="point_mass")
+    env = pes.make_env(cfg, num_envs=1, seed=0)
+    env.reset()
+    x = torch.tensor([[30.0, 40.0, 50.0, 60.0, 70.0, 99.2]])
+    y = torch.tensor([[20.0, 20.0, 20.0, 20.0, 20.0, 50.0]])
+    set_vehicles(
+        env,
+        x=x,
+        y=y,
+        vx=torch.tensor([[0, 0, 0, 0, 0, 8.0]]),
+        vy=torch.tensor([[0, 0, 0, 0, 0, 3.0]]),
+    )
+    _, _, term, _, info = env.step(torch.zeros(1, 5, 2), evader_actions=torch.tensor([[1.0, 0.0]]))
+    assert bool(info["evader_contact"][0]) and not bool(term[0])
+    assert float(env.positions[0, 5, 0]) == pytest.approx(100 - 0.3 - 1e-3, abs=1e-4)
+    vel = env.velocities[0, 5]
+    assert float(vel[0]) == pytest.approx(0.0, abs=1e-6) and float(vel[1]) > 2.5  # it slides
+
+
+def test_softplus_obstacle_term_is_stable_everywhere():
+    d = torch.tensor([-50.0, -1.0, 0.0, 0.3, 1.999, 2.0, 2.001, 5.0, 1e6])
+    term = softplus_obstacle_term(d, 2.0, 1e-3)
+    assert term.isfinite().all()
+    expected = torch.clamp(2.0 - d, min=0.0)
+    assert torch.allclose(term, expected, atol=1e-3)
+    assert float(term[5]) == pytest.approx(1e-3 * math.log(2.0), rel=1e-4)  # at d_safe
+    assert float(term[0]) == pytest.approx(52.0)  # deep inside a wall: linear, no overflow
+    grad = torch.autograd.functional.jacobian(lambda t: softplus_obstacle_term(t, 2.0, 1e-3), d)
+    assert grad.isfinite().all()
+
+
+def _brute_distance(points: np.ndarray, boxes: np.ndarray, size: float) -> np.ndarray:
+    segments = []
+    for x0, y0, x1, y1 in list(boxes) + [[0.0, 0.0, size, size]]:
+        t = np.linspace(0.0, 1.0, 2001)
+        segments += [
+            np.stack([x0 + (x1 - x0) * t, np.full_like(t, y0)], 1),
+            np.stack([x0 + (x1 - x0) * t, np.full_like(t, y1)], 1),
+            np.stack([np.full_like(t, x0), y0 + (y1 - y0) * t], 1),
+            np.stack([np.full_like(t, x1), y0 + (y1 - y0) * t], 1),
+        ]
+    edge = np.concatenate(segments)
+    return np.sqrt(((points[:, None] - edge[None]) ** 2).sum(-1)).min(1)
+
+
+def test_nearest_obstacle_matches_brute_force():
+    boxes = torch.tensor([[10.0, 10, 30, 30], [40, 10, 60, 30], [20, 50, 25, 80]])
+    arena = torch.tensor([100.0, 100.0])
+    gen = torch.Generator().manual_seed(0)
+    points = torch.rand(400, 2, generator=gen) * 100
+    dist, point, normal = nearest_obstacle(points, boxes, arena)
+    brute = _brute_distance(points.numpy(), boxes.numpy(), 100.0)
+    assert np.allclose(np.abs(dist.numpy()), brute, atol=0.06)
+    inside = (
+        (points[:, None, 0] > boxes[:, 0])
+        & (points[:, None, 0] < boxes[:, 2])
+        & (points[:, None, 1] > boxes[:, 1])
+        & (points[:, None, 1] < boxes[:, 3])
+    ).any(1)
+    assert ((dist < 0) == inside).all()
+    assert torch.allclose((points - point).norm(dim=-1), dist.abs(), atol=1e-4)
+    assert torch.allclose(normal.norm(dim=-1), torch.ones(400), atol=1e-5)
+
+
+def test_ray_distance():
+    boxes = torch.tensor([[40.0, 40, 60, 60]])
+    arena = torch.tensor([100.0, 100.0])
+    dirs = torch.tensor([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]])
+    d = ray_distance(torch.tensor([20.0]), torch.tensor([50.0]), dirs, boxes, arena, 1.0, 200.0)
+    assert d[0].tolist() == pytest.approx([19.0, 19.0, 49.0])
+    # Starting inside the margin: blocked towards the box, free away from it.
+    d = ray_distance(torch.tensor([39.5]), torch.tensor([50.0]), dirs, boxes, arena, 1.0, 200.0)
+    assert d[0, 0] == 0.0 and d[0, 1] == pytest.approx(38.5)
+
+
+def test_capture_needs_three_alive_pursuers_held_five_steps():
+    cfg = pes.EnvConfig(layout="empty", evader_policy="external", dynamics="point_mass")
+    env = pes.make_env(cfg, num_envs=1, seed=0)
+    env.reset()
+    x = torch.tensor([[50.5, 49.5, 50.0, 20.0, 80.0, 50.0]])
+    y = torch.tensor([[50.0, 50.0, 51.0, 20.0, 80.0, 50.0]])
+    set_vehicles(env, x=x, y=y, vx=torch.zeros(1, 6), vy=torch.zeros(1, 6))
+    still = torch.zeros(1, 5, 2)
+    for k in range(5):
+        _, reward, term, _, info = env.step(still, evader_actions=torch.zeros(1, 2))
+        assert bool(term[0]) == (k == 4)
+    assert bool(info["success"][0]) and int(info["steps"][0]) == 5
+    assert float(reward[0, 0]) > 4.0  # the capture reward, +5
+
+
+def test_too_few_pursuers_left_ends_in_failure():
+    cfg = pes.EnvConfig(
+        num_pursuers=3, damaged=0, crash_mode="disable", layout="empty", dynamics="point_mass"
+    )
+    env = pes.make_env(cfg, num_envs=1, seed=0)
+    env.reset()
+    x = torch.tensor([[1.0, 30.0, 40.0, 50.0]])
+    set_vehicles(
+        env,
+        x=x,
+        y=torch.tensor([[50.0, 20.0, 30.0, 50.0]]),
+        vx=torch.tensor([[-9.0, 0, 0, 0]]),
+        vy=torch.zeros(1, 4),
+    )
+    action = torch.zeros(1, 3, 2)
+    action[0, 0, 0] = -1
+    _, _, term, _, info = env.step(action)
+    assert bool(term[0]) and not bool(info["success"][0])
+
+
+def test_rewards_follow_equations_8_and_9():
+    cfg = pes.EnvConfig(layout="empty", evader_policy="external", dynamics="point_mass")
+    env = pes.make_env(cfg, num_envs=1, seed=0)
+    env.reset()
+    x = torch.tensor([[20.0, 30.0, 40.0, 60.0, 1.0, 50.0]])
+    y = torch.tensor([[50.0, 50.0, 50.0, 50.0, 50.0, 50.0]])
+    set_vehicles(env, x=x, y=y, vx=torch.zeros(1, 6), vy=torch.zeros(1, 6))
+    _, reward, _, _, info = env.step(torch.zeros(1, 5, 2), evader_actions=torch.zeros(1, 2))
+    rho = 1 / math.hypot(100, 100)
+    d = torch.tensor([30.0, 20.0, 10.0, 10.0, 49.0])
+    d_obs = torch.tensor([20.0, 30.0, 40.0, 40.0, 1.0])
+    r_co = -0.1 * rho * d.sum()
+    r_self = -(0.5 * rho * d + 1e-3 * torch.nn.functional.softplus((2.0 - d_obs) / 1e-3))
+    assert torch.allclose(reward[0], r_co + r_self, atol=1e-4)
+    assert torch.allclose(info["distances"][0], d, atol=1e-4)
+    assert float(info["evader_reward"][0]) == pytest.approx(rho * 10.0, abs=1e-4)
