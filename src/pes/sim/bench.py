@@ -3,8 +3,9 @@
 Method: random pursuer actions (drawn before timing), the configured evader, and episodes
 desynchronised at the start (each environment begins at a random step of its episode) so that
 the timed window contains auto-resets at their steady-state rate. After a warm-up that compiles
-both the step and the auto-reset (when ``compile``), ``steps`` steps are timed in five chunks;
-the reported rate is the median chunk's.
+both the step and the auto-reset (when ``compile``), steps are timed in chunks and the median
+chunk's rate is reported. ``benchmarks/bench_sim.py`` interleaves these chunks with those of
+other simulators, so that all are measured under the same conditions.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import platform
 import statistics
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Optional
 
 import torch
 
@@ -32,84 +33,105 @@ def machine_info(device: str = "cpu") -> dict[str, Any]:
         "cpu_count": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
     }
+    try:
+        with open("/proc/cpuinfo") as f:
+            names = [line.split(":", 1)[1].strip() for line in f if line.startswith("model name")]
+        if names:
+            info["cpu"] = names[0]
+    except OSError:
+        pass
     if device.startswith("cuda") and torch.cuda.is_available():
         info["gpu"] = torch.cuda.get_device_name(0)
     return info
 
 
-def _sync(device: torch.device) -> None:
-    if device.type == "cuda":
-        torch.cuda.synchronize()
+class Timer:
+    """Times chunks of calls to ``step`` (one call = ``per_call`` env-steps)."""
+
+    def __init__(self, step: Callable[[], None], per_call: int,
+                 sync: Callable[[], None] = lambda: None) -> None:  # fmt: skip
+        self.step, self.per_call, self.sync = step, per_call, sync
+        self.rates: list[float] = []
+
+    def chunk(self, calls: int) -> float:
+        """Run ``calls`` calls; record and return env-steps/s."""
+        self.sync()
+        start = time.perf_counter()
+        for _ in range(calls):
+            self.step()
+        self.sync()
+        rate = calls * self.per_call / (time.perf_counter() - start)
+        self.rates.append(rate)
+        return rate
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.rates)
 
 
-def measure(
-    config: EnvConfig,
-    num_envs: int,
-    device: str = "cpu",
-    steps: int = 200,
-    compile: bool = True,
-    seed: int = 0,
-) -> dict[str, Any]:
-    """Throughput of ``num_envs`` environments; see the module docstring."""
-    build = time.perf_counter()
-    env = make_env(
-        config, num_envs=num_envs, device=device, seed=seed, compile=compile, check_actions=False
-    )
+def pes_timer(config: EnvConfig, num_envs: int, device: str = "cpu", compile: bool = True,
+              seed: int = 0) -> tuple[Timer, dict[str, float]]:  # fmt: skip
+    """A :class:`Timer` of the batched environment, warmed up; and the set-up times."""
+    start = time.perf_counter()
+    env = make_env(config, num_envs=num_envs, device=device, seed=seed, compile=compile,
+                   check_actions=False)  # fmt: skip
     env.reset(seed=seed)
     # Desynchronise the episodes: environment i starts at a random step of its episode.
     generator = torch.Generator().manual_seed(seed)
     start_step = torch.randint(0, config.max_steps, (num_envs,), generator=generator)
     if num_envs == 1:
         start_step[:] = config.max_steps - 3  # make the warm-up include one reset
-    counters = env.state["counters"]
-    counters[scenario.Counters._fields.index("step")] = start_step.to(env.device)
+    env.state["counters"][scenario.Counters._fields.index("step")] = start_step.to(env.device)
     pool = [
-        torch.rand(num_envs, config.num_pursuers, 2, generator=generator) * 2 - 1 for _ in range(16)
+        (torch.rand(num_envs, config.num_pursuers, 2, generator=generator) * 2 - 1).to(env.device)
+        for _ in range(16)
     ]
-    pool = [a.to(env.device) for a in pool]
-    warmup_start = time.perf_counter()
-    for k in range(8):
-        env.step(pool[k % len(pool)])
-    _sync(env.device)
-    warmup = time.perf_counter() - warmup_start
-    chunk = max(1, steps // 5)
-    rates = []
-    for _ in range(5):
-        _sync(env.device)
-        t0 = time.perf_counter()
-        for k in range(chunk):
-            env.step(pool[k % len(pool)])
-        _sync(env.device)
-        rates.append(chunk * num_envs / (time.perf_counter() - t0))
-    return {
-        "num_envs": num_envs,
-        "env_steps_per_s": statistics.median(rates),
-        "env_steps_per_s_chunks": [round(r, 1) for r in rates],
-        "steps_timed": chunk * 5,
-        "compile": env.compiled,
-        "warmup_s": round(warmup, 2),
-        "setup_s": round(warmup_start - build, 2),
+    counter = [0]
+
+    def step() -> None:
+        env.step(pool[counter[0] % len(pool)])
+        counter[0] += 1
+
+    def sync() -> None:
+        if env.device.type == "cuda":
+            torch.cuda.synchronize()
+
+    built = time.perf_counter()
+    for _ in range(8):
+        step()
+    sync()
+    return Timer(step, num_envs, sync), {
+        "setup_s": round(built - start, 2),
+        "warmup_s": round(time.perf_counter() - built, 2),
     }
 
 
-def run_benchmark(
-    config: EnvConfig,
-    sizes: list[int],
-    device: str = "cpu",
-    steps: int = 200,
-    compile: bool = True,
-    log: Callable[[str], None] | None = print,
-) -> dict[str, Any]:
+def measure(config: EnvConfig, num_envs: int, device: str = "cpu", steps: int = 200,
+            compile: bool = True, seed: int = 0) -> dict[str, Any]:  # fmt: skip
+    """Throughput of ``num_envs`` environments (median of five chunks of ``steps / 5``)."""
+    timer, times = pes_timer(config, num_envs, device, compile, seed)
+    for _ in range(5):
+        timer.chunk(max(1, steps // 5))
+    return {
+        "num_envs": num_envs,
+        "env_steps_per_s": timer.median,
+        "env_steps_per_s_chunks": [round(r, 1) for r in timer.rates],
+        "compile": compile,
+        **times,
+    }
+
+
+def run_benchmark(config: EnvConfig, sizes: list[int], device: str = "cpu", steps: int = 200,
+                  compile: bool = True,
+                  log: Optional[Callable[[str], None]] = print) -> dict[str, Any]:  # fmt: skip
     """:func:`measure` at every batch size in ``sizes``; a JSON-friendly dict."""
     results = []
     for size in sizes:
         row = measure(config, size, device=device, steps=steps, compile=compile)
         results.append(row)
         if log:
-            log(
-                f"{size:>7} envs: {row['env_steps_per_s']:>12,.0f} env-steps/s "
-                f"(warm-up {row['warmup_s']} s)"
-            )
+            log(f"{size:>7} envs: {row['env_steps_per_s']:>12,.0f} env-steps/s "
+                f"(warm-up {row['warmup_s']} s)")  # fmt: skip
     return {
         "benchmark": "pes-sim",
         "device": device,

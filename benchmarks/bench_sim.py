@@ -1,0 +1,191 @@
+"""Simulator throughput, side by side with VMAS and MPE2, in one run on one machine.
+
+    python benchmarks/bench_sim.py     # CPU: writes benchmarks/results/sim_cpu.json
+    python benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 \
+        --skip-baselines --out benchmarks/results/sim_cuda.json
+
+What is measured (env-steps per second; one env-step = one control step of one game):
+
+* PES batched (``pes.make_env``), full quadrotor model (10 physics sub-steps of eqs. (1)-(2)
+  under the attitude PID), 5 pursuers with random actions and the scripted ``flee`` evader,
+  episodes desynchronised so that auto-resets happen at their steady rate; fused with
+  ``torch.compile`` and, for reference, eager.
+* VMAS ``simple_tag`` with 5 chasers, 1 runner and 8 landmarks, continuous actions, random
+  actions, the same batch sizes.
+* The single-environment PettingZoo path: ``pes.pettingzoo.parallel_env(compile=True)`` against
+  MPE2 ``simple_tag_v3`` (5 adversaries, 1 good agent, 8 obstacles, continuous actions), both
+  stepped with actions sampled from their action spaces.
+
+The machine this runs on is shared and its speed drifts by a factor of two over minutes, so
+the simulators being compared are timed in interleaved chunks (PES, VMAS, PES, VMAS, ...) and
+each figure is the median of its chunks. VMAS and MPE2 are optional (``pip install vmas
+mpe2``); missing ones are reported as such.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+import pes
+from pes.sim.bench import Timer, machine_info, pes_timer
+
+ROUNDS = 5
+
+
+def vmas_timer(num_envs: int, device: str) -> Timer:
+    import vmas
+
+    env = vmas.make_env(
+        "simple_tag",
+        num_envs=num_envs,
+        device=device,
+        continuous_actions=True,
+        num_good_agents=1,
+        num_adversaries=5,
+        num_landmarks=8,
+        seed=0,
+    )
+    env.reset()
+    generator = torch.Generator().manual_seed(0)
+    pool = [
+        [(torch.rand(num_envs, 2, generator=generator) * 2 - 1).to(device) for _ in env.agents]
+        for _ in range(8)
+    ]
+    counter = [0]
+
+    def step() -> None:
+        env.step(pool[counter[0] % 8])
+        counter[0] += 1
+
+    for _ in range(5):
+        step()
+    return Timer(step, num_envs)
+
+
+def mpe2_timer() -> Timer:
+    from mpe2 import simple_tag_v3
+
+    env = simple_tag_v3.parallel_env(
+        num_good=1, num_adversaries=5, num_obstacles=8, max_cycles=10**9, continuous_actions=True
+    )
+    env.reset(seed=0)
+    for agent in env.agents:
+        env.action_space(agent).seed(0)
+
+    def step() -> None:
+        env.step({a: env.action_space(a).sample() for a in env.agents})
+
+    for _ in range(10):
+        step()
+    return Timer(step, 1)
+
+
+def pettingzoo_timer() -> tuple[Timer, float]:
+    from pes.pettingzoo import parallel_env
+
+    env = parallel_env(compile=True)
+    env.reset(seed=0)
+    for agent in env.possible_agents:
+        env.action_space(agent).seed(0)
+
+    def step() -> None:
+        if not env.agents:
+            env.reset()
+        env.step({a: env.action_space(a).sample() for a in env.agents})
+
+    start = time.perf_counter()
+    for _ in range(520):  # past the first episode's end: the reset path is compiled too
+        step()
+    return Timer(step, 1), round(time.perf_counter() - start, 1)
+
+
+def chunk_calls(num_envs: int, steps: int) -> int:
+    return max(4, steps // ROUNDS) if num_envs >= 1024 else max(20, steps // ROUNDS)
+
+
+def log(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 64, 1024, 4096])
+    parser.add_argument("--steps", type=int, default=200, help="timed steps per measurement")
+    parser.add_argument("--skip-baselines", action="store_true", help="PES only")
+    parser.add_argument("--skip-eager", action="store_true", help="no eager PES reference")
+    parser.add_argument("--out", default="benchmarks/results/sim_cpu.json")
+    args = parser.parse_args()
+
+    config = pes.EnvConfig().validate()
+    report: dict = {
+        "benchmark": "simulator throughput (env-steps/s), medians of interleaved chunks",
+        "command": " ".join(["python"] + sys.argv),
+        "date": time.strftime("%Y-%m-%d"),
+        "device": args.device,
+        "machine": machine_info(args.device),
+        "scenario": "default EnvConfig: 5 pursuers (random actions), flee evader, quadrotor "
+        "dynamics with 10 sub-steps, 8 buildings",
+        "sizes": [],
+    }
+    for size in args.sizes:
+        row: dict = {"num_envs": size}
+        timers = {}
+        timers["pes_compiled"], row["pes_compiled_setup"] = pes_timer(config, size, args.device)
+        if not args.skip_eager:
+            timers["pes_eager"], _ = pes_timer(config, size, args.device, compile=False)
+        if not args.skip_baselines:
+            try:
+                timers["vmas_simple_tag"] = vmas_timer(size, args.device)
+            except ImportError as exc:
+                row["vmas_simple_tag"] = f"not installed ({exc})"
+        calls = chunk_calls(size, args.steps)
+        for _ in range(ROUNDS):
+            for name, timer in timers.items():
+                timer.chunk(calls if name != "pes_eager" else max(2, calls // 4))
+        for name, timer in timers.items():
+            row[name] = round(timer.median, 1)
+            row[f"{name}_chunks"] = [round(r, 1) for r in timer.rates]
+        if "vmas_simple_tag" in timers:
+            row["pes_over_vmas"] = round(row["pes_compiled"] / row["vmas_simple_tag"], 2)
+        log(json.dumps({k: v for k, v in row.items() if not k.endswith("chunks")}))
+        report["sizes"].append(row)
+
+    if not args.skip_baselines:
+        single: dict = {}
+        pz, single["pes_pettingzoo_warmup_s"] = pettingzoo_timer()
+        timers = {"pes_pettingzoo": pz}
+        try:
+            timers["mpe2_simple_tag"] = mpe2_timer()
+        except ImportError as exc:
+            single["mpe2_simple_tag"] = f"not installed ({exc})"
+        for _ in range(ROUNDS):
+            for timer in timers.values():
+                timer.chunk(max(100, args.steps))
+        for name, timer in timers.items():
+            single[name] = round(timer.median, 1)
+            single[f"{name}_chunks"] = [round(r, 1) for r in timer.rates]
+        if "mpe2_simple_tag" in timers:
+            single["pes_over_mpe2"] = round(single["pes_pettingzoo"] / single["mpe2_simple_tag"], 2)
+        log(json.dumps({k: v for k, v in single.items() if not k.endswith("chunks")}))
+        report["single_env_pettingzoo"] = single
+        report["targets"] = {
+            "pes_over_vmas at 1024 envs": ">= 20",
+            "pes_over_mpe2 (PettingZoo, 1 env)": ">= 2",
+        }
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

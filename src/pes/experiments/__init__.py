@@ -1,0 +1,1 @@
+"""Experiments: calibration of the scenario and, later, the reproduction of the paper."""

@@ -1,0 +1,82 @@
+"""Calibration of the default scenario: how hard is the game without learning?
+
+    python -m pes.experiments.calibration --episodes 1000 --out results/calibration.json
+
+Measures, with the paper's evaluation settings (disturbance on, ``crash_mode="disable"``),
+against the scripted ``flee`` evader on the default map:
+
+* five PID(PF) pursuers (capture: 3 within 2 m for 5 steps) -- the paper reports 27.3 % for
+  PID(PF) against its DDPG evader;
+* one PID(PF) pursuer (capture: 1 within 2 m for 5 steps) -- a lone pursuer should essentially
+  never catch the faster evader;
+* five random pursuers, for scale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from pes.evaluate import evaluate
+from pes.policies import PIDPotentialField, RandomPolicy
+from pes.sim.bench import machine_info
+from pes.sim.config import EnvConfig
+
+CASES = {
+    "pid-pf, 5 pursuers": (PIDPotentialField, {"num_pursuers": 5, "capture_count": 3}),
+    "pid-pf, 1 pursuer": (PIDPotentialField, {"num_pursuers": 1, "capture_count": 1}),
+    "random, 5 pursuers": (RandomPolicy, {"num_pursuers": 5, "capture_count": 3}),
+}
+
+
+def run(episodes: int, seed: int) -> dict:
+    rows = {}
+    for name, (policy_cls, overrides) in CASES.items():
+        config = EnvConfig(disturbance=True, crash_mode="disable", **overrides).validate()
+        start = time.time()
+        result = evaluate(
+            policy_cls(config),
+            config,
+            episodes=episodes,
+            num_envs=min(episodes, 250),
+            seed=seed,
+            progress=True,
+        )
+        rows[name] = {**result.summary(), "seconds": round(time.time() - start, 1)}
+        print(
+            f"{name}: success {100 * result.success_rate:.1f} % "
+            f"(± {100 * result.success_rate_ci95:.1f}), steps {result.mean_steps:.0f}, "
+            f"crashes/episode {result.mean_crashes:.2f}",
+            file=sys.stderr,
+        )
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default="results/calibration.json")
+    args = parser.parse_args()
+    torch.set_num_threads(max(1, torch.get_num_threads()))
+    report = {
+        "command": "python -m pes.experiments.calibration " + " ".join(sys.argv[1:]),
+        "date": time.strftime("%Y-%m-%d"),
+        "machine": machine_info(),
+        "settings": "default map, flee evader, disturbance on, crash_mode=disable",
+        "results": run(args.episodes, args.seed),
+    }
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2))
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,26 @@
+"""The generated parts of the docs match the code and the committed results."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_generated_docs_are_current():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "gen_docs.py"), "--check"],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_readme_starts_with_the_two_commands():
+    text = (ROOT / "README.md").read_text()
+    head = text[: text.index("##")] if "##" in text else text
+    assert "pes demo" in head and "pytest" in head
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert "pytest" in ci
