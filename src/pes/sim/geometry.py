@@ -28,15 +28,12 @@ def nearest_obstacle_xy(
         nx, ny: (...) unit normal of that surface, pointing out of the obstacle. The nearest
             surface point is ``(px, py) - (nx, ny) * distance``.
     """
-    # Walls: the distance to each side, measured inwards; keep the nearest side.
-    width, height = arena[0], arena[1]
-    dist = px
-    nx, ny = torch.ones_like(px), torch.zeros_like(px)
-    for side_dist, sx, sy in ((width - px, -1.0, 0.0), (py, 0.0, 1.0), (height - py, 0.0, -1.0)):
-        closer = side_dist < dist
-        dist = torch.where(closer, side_dist, dist)
-        nx = torch.where(closer, sx, nx)
-        ny = torch.where(closer, sy, ny)
+    # Walls: the distance to each side (left, right, bottom, top), measured inwards; keep the
+    # nearest side, whose inward normal is +-x or +-y.
+    walls = torch.stack([px, arena[0] - px, py, arena[1] - py], dim=-1)
+    dist, side = walls.min(dim=-1)
+    nx = (side == 0).to(px.dtype) - (side == 1).to(px.dtype)
+    ny = (side == 2).to(px.dtype) - (side == 3).to(px.dtype)
     if boxes.shape[0] > 0:
         # Buildings: the box signed-distance function around centre and half size.
         cx, cy = (boxes[:, 0] + boxes[:, 2]) * 0.5, (boxes[:, 1] + boxes[:, 3]) * 0.5
