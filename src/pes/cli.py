@@ -85,14 +85,20 @@ def _non_negative(text: str) -> int:
 # --- policies --------------------------------------------------------------------------------
 
 
-def make_policy(name: str, config: EnvConfig, seed: int = 0):
-    """The pursuer policy called ``name`` for the scenario ``config``."""
+def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"):
+    """The pursuer policy called ``name`` for the scenario ``config``: a scripted policy, a
+    shipped model (``cbc-tp``), or a policy file, checkpoint or run folder."""
+    from pes.algos.policy import is_policy_spec, load_pursuer_policy
     from pes.policies import SCRIPTED
 
     if name in SCRIPTED:
         return SCRIPTED[name](config, seed=seed)
-    known = ", ".join(SCRIPTED)
-    raise ConfigError(f"unknown policy '{name}' (available: {known})")
+    if is_policy_spec(name):
+        return load_pursuer_policy(name, config, device)[0]
+    known = ", ".join([*SCRIPTED, "cbc-tp"])
+    raise ConfigError(
+        f"unknown policy '{name}' (available: {known}, or a policy file / checkpoint path)"
+    )
 
 
 def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "cpu"):
@@ -158,7 +164,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.damaged is not None:
         defaults["damaged"] = args.damaged
     config = _scenario(args, **defaults)
-    policy = make_policy(args.policy, config, seed=args.seed)
+    policy = make_policy(args.policy, config, seed=args.seed, device=args.device)
     start = time.time()
     result = evaluate(
         policy,
@@ -222,6 +228,46 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    from pes.algos.config import build_train_config
+    from pes.algos.trainer import train
+
+    values: dict[str, Any] = {}
+    if args.config:
+        values.update(load_yaml(args.config))
+    env_values = dict(values.pop("env", {}) or {})
+    for text in args.overrides:
+        key, value = parse_override(text)
+        if key.startswith("env."):
+            env_values[key[4:]] = value
+        else:
+            values[key] = value
+    values["env"] = env_values
+    if "algo" in values and values.pop("algo") != args.algo:
+        raise ConfigError("the config file names another algo than --algo")
+    values.pop("preset", None)
+    cfg = build_train_config(args.algo, args.preset, values)
+    out = Path(args.out or f"runs/{args.algo}")
+    _say(args, f"training {args.algo} ({args.preset} preset) into {out}")
+    summary = train(cfg, out, resume=args.resume, progress=not args.json)
+    if args.json:
+        _print_json(summary)
+    else:
+        print(
+            f"done: {summary['episodes']} episodes, {summary['env_steps']} env steps, "
+            f"{summary['updates']} updates in {summary['wall_s']:.0f} s "
+            f"(stopped by {summary['stopped_by']})"
+        )
+        if "eval" in summary:
+            ev = summary["eval"]
+            print(
+                f"evaluation vs {ev['opponent']}: success {100 * ev['success_rate']:.1f} %, "
+                f"mean steps {ev['mean_steps']:.1f} over {ev['episodes']} episodes"
+            )
+        print(f"policy: {out / 'policy.pt'}   logs: {out / 'progress.csv'}, {out / 'tb'}")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from pes.sim.bench import run_benchmark
 
@@ -272,7 +318,11 @@ def build_parser() -> argparse.ArgumentParser:
         "unless set otherwise). Prints success rate, mean episode steps and "
         "average reward.",
     )
-    p.add_argument("--policy", required=True, help="pid-pf or random")
+    p.add_argument(
+        "--policy",
+        required=True,
+        help="pid-pf, random, cbc-tp (the shipped swarm), or a policy.pt / checkpoint / run folder",
+    )
     p.add_argument("--episodes", type=_positive, default=100, help="episodes (default: 100)")
     p.add_argument(
         "--damaged",
@@ -318,6 +368,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_render)
+
+    from pes.algos import ALGOS
+
+    p = sub.add_parser(
+        "train",
+        help="train a learner (progress bar, CSV/TensorBoard logs, checkpoints)",
+        description="Train an algorithm into --out: config.yaml, progress.csv, tb/, "
+        "checkpoint.pt (every checkpoint_every minutes, atomically), policy.pt and eval.json "
+        "at the end. --resume continues from checkpoint.pt.",
+    )
+    p.add_argument("--algo", required=True, choices=list(ALGOS), help="the algorithm")
+    p.add_argument(
+        "--preset",
+        default="quick",
+        choices=["quick", "paper", "tiny"],
+        help="budget preset: quick (laptop CPU, default), paper (the paper's settings), tiny",
+    )
+    p.add_argument("--config", metavar="F.yaml", help="TrainConfig values from a YAML file")
+    p.add_argument(
+        "--set",
+        metavar="KEY=VALUE",
+        action="append",
+        default=[],
+        dest="overrides",
+        help="override a TrainConfig key (repeatable); env.KEY sets a scenario key, e.g. "
+        "--set batch_size=256 --set env.num_pursuers=4",
+    )
+    p.add_argument("--out", help="run folder (default: runs/ALGO)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--json", action="store_true", help="print one JSON object at the end")
+    p.set_defaults(func=cmd_train)
 
     p = sub.add_parser(
         "bench",

@@ -17,7 +17,7 @@ from pes.errors import ConfigError
 
 Dynamics = Literal["quadrotor", "point_mass"]
 CrashMode = Literal["continue", "disable"]
-EVADER_POLICIES = ("flee", "random", "external")
+EVADER_POLICIES = ("flee", "random", "ddpg", "external")
 
 
 @dataclass
@@ -30,8 +30,12 @@ class EnvConfig:
     num_pursuers: int = 5
     """Number of pursuers N (any N >= 1). They are named ``pursuer_0`` ... ``pursuer_{N-1}``."""
     evader_policy: str = "flee"
-    """The evader's behaviour: ``flee`` (scripted), ``random``, or ``external`` (its actions
-    are passed to ``step``, e.g. to train an evader)."""
+    """The evader's behaviour: ``flee`` (scripted), ``random``, ``ddpg`` (a trained, frozen
+    DDPG evader: ``evader_model``), or ``external`` (its actions are passed to ``step``, e.g.
+    to train an evader)."""
+    evader_model: str = "evader-ddpg"
+    """With ``evader_policy="ddpg"``: the evader's policy file (``pes train --algo evader-ddpg``
+    writes ``policy.pt``), or ``evader-ddpg`` for the one shipped with PES."""
 
     # --- arena and buildings (§II-A) -------------------------------------------------------
     arena_width: float = 100.0
@@ -255,6 +259,9 @@ class EnvConfig:
                 f"evader_policy must be one of {', '.join(EVADER_POLICIES)}, "
                 f"got '{self.evader_policy}'"
             )
+        model = self.evader_model
+        if self.evader_policy == "ddpg" and model != "evader-ddpg" and not Path(model).exists():
+            raise ConfigError(f"evader_model '{self.evader_model}' does not exist")
         if self.layout not in ("grid", "empty") and not Path(self.layout).is_file():
             raise ConfigError(
                 f"layout must be 'grid', 'empty' or an existing layout file, got '{self.layout}'"

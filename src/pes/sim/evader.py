@@ -110,3 +110,16 @@ class RandomEvader:
         u = rng.uniform(key, 0 * 8 + STREAM_EVADER_RANDOM)
         w = rng.uniform(key, 1 * 8 + STREAM_EVADER_RANDOM)
         return u * 2.0 - 1.0, w * 2.0 - 1.0
+
+
+class NetworkEvader:
+    """A frozen evader network (the DDPG evader): ``actor(evader_obs) -> (E, 2)`` on the
+    evader's observation as built by ``observe`` (a function of the state views)."""
+
+    def __init__(self, actor: torch.nn.Module, observe: Callable[..., Tensor]) -> None:
+        self.actor = actor
+        self.observe = observe
+
+    def __call__(self, v: Vehicles, counters, flags) -> tuple[Tensor, Tensor]:
+        action = self.actor(self.observe(v, flags))
+        return action[:, 0], action[:, 1]

@@ -45,7 +45,7 @@ from pes.sim.dynamics import (
     point_mass_step,
     quadrotor_step,
 )
-from pes.sim.evader import EvaderPolicy, FleeEvader, RandomEvader
+from pes.sim.evader import EvaderPolicy, FleeEvader, NetworkEvader, RandomEvader
 from pes.sim.geometry import nearest_obstacle, nearest_obstacle_xy
 from pes.sim.layout import Layout, make_layout
 
@@ -203,6 +203,13 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
         )
     elif config.evader_policy == "random":
         scenario.evader_policy = RandomEvader()
+    elif config.evader_policy == "ddpg":
+        from pes.algos.policy import load_evader_actor  # noqa: PLC0415 - learners import sim
+
+        actor = load_evader_actor(config.evader_model, device)
+        scenario.evader_policy = NetworkEvader(
+            actor, lambda v, f: observe(scenario, v, f)["evader_obs"]
+        )
     return scenario
 
 

@@ -1,0 +1,147 @@
+"""Replay storage shared by the off-policy learners.
+
+:class:`ReplayBuffer` is a ring of ``rows`` time steps of ``num_envs`` environments (time-major,
+each field shaped (rows, num_envs, ...)), filled by batched collection one vector step at a
+time. Because each environment's transitions stay in order down its column, a transition's
+past (TP Net's n-step history) and future (the k positions TP Net must predict) are found by
+stepping along the column, guarded by the episode step counter: replay buffer R and trajectory
+buffer T of Algorithm 1 are two ways of sampling the same storage, and the global state is
+stored once per transition.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from pes.errors import ConfigError
+
+FieldSpec = dict[str, tuple[tuple[int, ...], torch.dtype]]
+
+
+class ReplayBuffer:
+    """Time-major ring buffer of transitions from ``num_envs`` environments.
+
+    Args:
+        capacity: transitions kept (rounded down to a multiple of ``num_envs``).
+        num_envs: environments written per :meth:`add`.
+        fields: name -> (per-transition shape, dtype). ``ep_step`` (int32, the step of the
+            episode at which the transition starts) is always added.
+        device: where the storage lives.
+    """
+
+    def __init__(
+        self, capacity: int, num_envs: int, fields: FieldSpec, device: torch.device | str = "cpu"
+    ) -> None:
+        self.rows = capacity // num_envs
+        if self.rows < 2:
+            raise ConfigError(
+                f"buffer capacity {capacity} holds fewer than 2 steps of {num_envs} environments"
+            )
+        self.num_envs = num_envs
+        self.device = torch.device(device)
+        spec = dict(fields)
+        spec["ep_step"] = ((), torch.int32)
+        self.data = {
+            name: torch.zeros((self.rows, num_envs, *shape), dtype=dtype, device=self.device)
+            for name, (shape, dtype) in spec.items()
+        }
+        self.next_row = 0
+        """Row that the next :meth:`add` writes."""
+        self.filled = 0
+        """Rows holding data (at most ``rows``)."""
+
+    @property
+    def capacity(self) -> int:
+        return self.rows * self.num_envs
+
+    def __len__(self) -> int:
+        return self.filled * self.num_envs
+
+    @property
+    def bytes_per_transition(self) -> int:
+        """Bytes of storage per stored transition (all fields)."""
+        total = sum(t.element_size() * t[0, 0].numel() for t in self.data.values())
+        return int(total)
+
+    def add(self, **values: Tensor) -> None:
+        """Write one vector step: every field shaped (num_envs, ...)."""
+        for name, store in self.data.items():
+            store[self.next_row] = values[name]
+        self.next_row = (self.next_row + 1) % self.rows
+        self.filled = min(self.filled + 1, self.rows)
+
+    def _age(self, row: Tensor) -> Tensor:
+        """How many adds ago ``row`` was written (0 = the newest)."""
+        return (self.next_row - 1 - row) % self.rows
+
+    def sample_index(self, batch: int, generator: torch.Generator, past: int = 0, future: int = 0):
+        """Random (row, env) indices of transitions whose ``past`` earlier and ``future`` later
+        rows are still stored. Returns two (batch,) long tensors."""
+        usable = self.filled - past - future
+        if usable < 1:
+            raise ValueError("not enough data in the buffer to sample")
+        age = torch.randint(future, future + usable, (batch,), generator=generator)
+        row = (self.next_row - 1 - age) % self.rows
+        env = torch.randint(0, self.num_envs, (batch,), generator=generator)
+        return row.to(self.device), env.to(self.device)
+
+    def get(self, name: str, row: Tensor, env: Tensor, offset: int = 0) -> Tensor:
+        """Field ``name`` at (row + offset, env) for each index."""
+        return self.data[name][(row + offset) % self.rows, env]
+
+    def window(
+        self, name: str, row: Tensor, env: Tensor, length: int, last: Tensor | None = None
+    ) -> Tensor:
+        """The last ``length`` values of field ``name`` in each sampled transition's episode,
+        oldest first, ending at the transition itself -- or, with ``last`` (B, ...), ending with
+        ``last`` after the transition (the window of the next state). Steps before the episode's
+        start are zero, like the environment's zero-padded history.
+
+        Returns (B, length, ...).
+        """
+        ep_step = self.data["ep_step"][row, env]
+        shift = 0 if last is None else 1
+        parts = []
+        for back in range(length - 1 - shift, -1, -1):
+            value = self.get(name, row, env, -back)
+            keep = (ep_step >= back).view(-1, *([1] * (value.dim() - 1)))
+            parts.append(value * keep.to(value.dtype))
+        if last is not None:
+            parts.append(last)
+        return torch.stack(parts, dim=1)
+
+    def same_episode_ahead(self, row: Tensor, env: Tensor, steps: int) -> Tensor:
+        """(B,) bool: the next ``steps`` stored transitions of each index belong to its
+        episode (so its future positions can serve as TP Net targets)."""
+        ep_step = self.data["ep_step"][row, env]
+        ok = torch.ones_like(ep_step, dtype=torch.bool)
+        for ahead in range(1, steps + 1):
+            ok &= self.get("ep_step", row, env, ahead) == ep_step + ahead
+        return ok
+
+    # --- checkpoints ---------------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        n = self.filled
+        if self.filled < self.rows:
+            data = {k: v[:n].clone() for k, v in self.data.items()}
+        else:
+            data = {k: v.clone() for k, v in self.data.items()}
+        return {
+            "rows": self.rows,
+            "num_envs": self.num_envs,
+            "next_row": self.next_row,
+            "filled": self.filled,
+            "data": data,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        if state["rows"] != self.rows or state["num_envs"] != self.num_envs:
+            raise ValueError(
+                f"buffer of {state['rows']}x{state['num_envs']} rows cannot be loaded into one of "
+                f"{self.rows}x{self.num_envs}"
+            )
+        for k, v in state["data"].items():
+            self.data[k][: v.shape[0]] = v.to(self.device)
+        self.next_row = int(state["next_row"])
+        self.filled = int(state["filled"])

@@ -1,0 +1,346 @@
+"""CBC-TP Net (paper §III-IV, Algorithm 1) and, with ``use_tp=False``, CBC Net.
+
+One update (Algorithm 1, lines 11-21), from the shared replay storage:
+
+1. TP Net: a minibatch of J history windows (n frames) and the evader's next k positions,
+   loss eq. (7) (mean squared error in arena units);
+2. critic: y_i = r_i + gamma * (1 - terminated) * Q'_i(s', a', p'), a' from the target actor on
+   s' and the predicted path p' of s' (eqs. 5-6), masked mean over the pursuers alive in s;
+3. actor: maximise Q_i(s, a_1..pi(o_i, p)..a_N, p) (eq. 4) for one random alive pursuer i of
+   each sample, the others' actions from the buffer, plus a small penalty on the squared
+   action;
+4. soft target updates with rate tau.
+
+Gradients flow through the LSTMs by backpropagation through time (across the agents for the
+actor and critic, across the history for TP Net). The prediction fed to the actor and critic is
+TP Net's, detached: TP Net learns only from eq. (7), as Algorithm 1's hierarchy.
+
+The predictions are stored with each transition as TP Net made them while acting (for s and
+for s'), in the place of Algorithm 1's p_tar: recomputing them for every minibatch would double
+the cost of an update on a CPU, and TP Net converges within the warm-up (its loss is ~1e-5 in
+arena units after a few hundred updates), so the stored ones are current but for the first
+transitions. TP Net is trained from the warm-up on; the actor and critic after it.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from pes.algos.buffer import ReplayBuffer
+from pes.algos.common import masked_mean, optimise, soft_update, target_copy
+from pes.algos.config import TrainConfig
+from pes.algos.features import frames, pursuer_obs, relative_prediction
+from pes.algos.nets import CBCActor, CBCCritic, TPNet
+from pes.algos.noise import OUNoise
+from pes.sim.config import EnvConfig
+
+
+class PursuerActors(nn.Module):
+    """One :class:`CBCActor` shared by all pursuers, or one per pursuer."""
+
+    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+        super().__init__()
+        count = 1 if cfg.shared else num_pursuers
+        pred_dim = 2 * cfg.horizon if cfg.use_tp else 0
+        self.nets = nn.ModuleList(
+            CBCActor(cfg.hidden, cfg.mlp_hidden, pred_dim) for _ in range(count)
+        )
+
+    def forward(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, N, 8), mask (B, N, N), pred (B, N, 2k) or None -> actions (B, N, 2)."""
+        b, n = obs.shape[:2]
+        if len(self.nets) == 1:
+            p = pred.flatten(0, 1) if pred is not None else None
+            return self.nets[0](obs.flatten(0, 1), mask.flatten(0, 1), p).view(b, n, 2)
+        return torch.stack(
+            [
+                net(obs[:, i], mask[:, i], pred[:, i] if pred is not None else None)
+                for i, net in enumerate(self.nets)
+            ],
+            dim=1,
+        )
+
+    def act_one(self, obs: Tensor, mask: Tensor, pred: Tensor | None, agent: Tensor) -> Tensor:
+        """One pursuer per sample: obs (B, N, 8), mask (B, N), pred (B, 2k), agent (B,) long
+        -> (B, 2)."""
+        if len(self.nets) == 1:
+            return self.nets[0](obs, mask, pred)
+        out = obs.new_zeros(obs.shape[0], 2)
+        for i, net in enumerate(self.nets):
+            rows = agent == i
+            if bool(rows.any()):
+                out[rows] = net(obs[rows], mask[rows], pred[rows] if pred is not None else None)
+        return out
+
+
+class PursuerCritics(nn.Module):
+    """One :class:`CBCCritic` shared by all pursuers, or one per pursuer (pursuer i reads its Q
+    from its own critic's cell i)."""
+
+    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+        super().__init__()
+        count = 1 if cfg.shared else num_pursuers
+        pred_dim = 2 * cfg.horizon if cfg.use_tp else 0
+        self.nets = nn.ModuleList(
+            CBCCritic(cfg.hidden, cfg.mlp_hidden, pred_dim) for _ in range(count)
+        )
+
+    def forward(self, state: Tensor, alive: Tensor, actions: Tensor, pred: Tensor | None):
+        """-> Q (B, N)."""
+        if len(self.nets) == 1:
+            return self.nets[0](state, alive, actions, pred)
+        return torch.stack(
+            [net(state, alive, actions, pred)[:, i] for i, net in enumerate(self.nets)], dim=1
+        )
+
+
+class CBCTPPolicy(nn.Module):
+    """The trained swarm as a :class:`pes.policies.Policy`: TP Net's prediction from
+    ``info["history"]``, then the actor on each pursuer's observation."""
+
+    def __init__(self, actor: PursuerActors, tp: TPNet | None) -> None:
+        super().__init__()
+        self.actor = actor
+        self.tp = tp
+        self.last_prediction: Tensor | None = None
+        """(E, k, 2) the latest predicted evader positions in metres-free arena units."""
+
+    def predict(self, info: dict[str, Tensor]) -> Tensor | None:
+        """(E, k, 2) predicted normalised evader positions, or None without TP Net."""
+        if self.tp is None:
+            return None
+        return self.tp(info["history"])
+
+    @torch.no_grad()
+    def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
+        return self.act(obs, info)
+
+    def act(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
+        pred = self.predict(info)
+        self.last_prediction = pred
+        rel = None if pred is None else relative_prediction(pred, info["state"], obs.shape[1])
+        return self.actor(obs, info["obs_mask"], rel)
+
+    def reset(self, mask: Tensor | None = None) -> None:
+        """Stateless between steps (the history comes from the environment)."""
+
+
+class CBCTP:
+    """The CBC-TP Net learner (``use_tp=False``: CBC Net)."""
+
+    name = "cbc-tp"
+
+    def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
+        self.cfg = cfg
+        self.n = env_cfg.num_pursuers
+        self.history = env_cfg.history_length
+        self.device = device
+        self.actor = PursuerActors(cfg, self.n).to(device)
+        self.critic = PursuerCritics(cfg, self.n).to(device)
+        self.tp = (
+            TPNet(cfg.tp_hidden, cfg.tp_layers, cfg.horizon).to(device) if cfg.use_tp else None
+        )
+        self.actor_target = target_copy(self.actor)
+        self.critic_target = target_copy(self.critic)
+        self.policy = CBCTPPolicy(self.actor, self.tp)
+        self.target_policy = CBCTPPolicy(self.actor_target, self.tp)
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
+        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
+        self.opt_tp = (
+            torch.optim.Adam(self.tp.parameters(), lr=cfg.lr_tp) if self.tp is not None else None
+        )
+        a = self.n + 1
+        self.buffer = ReplayBuffer(
+            cfg.buffer_size,
+            cfg.num_envs,
+            {
+                "state": ((a, 8), torch.float32),
+                "alive": ((self.n,), torch.bool),
+                "action": ((self.n, 2), torch.float32),
+                "reward": ((self.n,), torch.float32),
+                "next_state": ((a, 8), torch.float32),
+                "next_alive": ((self.n,), torch.bool),
+                "terminated": ((), torch.bool),
+                **(
+                    {
+                        "pred": ((cfg.horizon, 2), torch.float32),
+                        "next_pred": ((cfg.horizon, 2), torch.float32),
+                    }
+                    if cfg.use_tp
+                    else {}
+                ),
+            },
+            device,
+        )
+        self.noise = OUNoise((cfg.num_envs, self.n, 2), cfg.noise_theta, 1.0, device=device)
+        self.updates = 0
+
+    @staticmethod
+    def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
+        """The training scenario (unchanged: the configured evader plays)."""
+        return env_cfg
+
+    # --- acting ----------------------------------------------------------------------------------
+    @torch.no_grad()
+    def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
+        """(E, N, 2) actions of the current actor plus OU noise, clipped to [-1, 1], and no
+        evader actions (the environment's evader plays)."""
+        actions = self.policy.act(obs, info)
+        if noise_scale > 0:
+            actions = actions + self.noise.sample(gen, noise_scale)
+        return actions.clamp(-1.0, 1.0), None
+
+    def record(
+        self,
+        before: dict[str, Tensor],
+        actions: Tensor,
+        evader_actions: Tensor | None,
+        reward: Tensor,
+        terminated: Tensor,
+        after: dict[str, Tensor],
+    ) -> None:
+        """Store one vector step: ``before``/``after`` are the infos around ``env.step``."""
+        preds = {}
+        if self.tp is not None:
+            with torch.no_grad():
+                preds = {
+                    "pred": self.policy.last_prediction,
+                    "next_pred": self.tp(after["final_history"]),
+                }
+        self.buffer.add(
+            **preds,
+            state=before["state"],
+            alive=before["obs_mask"][:, :, 0],
+            action=actions,
+            reward=reward,
+            next_state=after["final_state"],
+            next_alive=after["final_obs_mask"][:, :, 0],
+            terminated=terminated,
+            ep_step=(after["steps"] - 1).to(torch.int32),
+        )
+
+    def episode_reset(self, done: Tensor) -> None:
+        self.noise.reset(done)
+
+    # --- learning --------------------------------------------------------------------------------
+    def ready(self) -> bool:
+        """Whether updates may start: TP Net as soon as a full window is stored."""
+        wanted = max(self.cfg.tp_batch_size, 1) if self.tp is not None else self.cfg.warmup
+        return len(self.buffer) >= max(wanted, self.cfg.batch_size) and (
+            self.buffer.filled > self.history + self.cfg.horizon + 1
+        )
+
+    def update(self, gen: torch.Generator) -> dict[str, float]:
+        """One gradient update of TP Net, then (after the warm-up) the critic and the actor;
+        returns their metrics."""
+        cfg, buf, n = self.cfg, self.buffer, self.n
+        stats: dict[str, float] = {}
+        if self.tp is not None:
+            stats.update(self.update_tp(gen))
+        if len(buf) < cfg.warmup:
+            return stats
+
+        row, env = buf.sample_index(cfg.batch_size, gen)
+        state, alive = buf.get("state", row, env), buf.get("alive", row, env)
+        next_state, next_alive = buf.get("next_state", row, env), buf.get("next_alive", row, env)
+        action, reward = buf.get("action", row, env), buf.get("reward", row, env)
+        terminated = buf.get("terminated", row, env)
+        with torch.no_grad():
+            pred = next_pred = None
+            if self.tp is not None:
+                hist = frames(buf.window("state", row, env, self.history))
+                next_hist = frames(buf.window("state", row, env, self.history, last=next_state))
+                both = self.tp(torch.cat([hist, next_hist]))
+                pred, next_pred = both.split(len(row))
+            next_obs, next_mask = pursuer_obs(next_state, next_alive)
+            rel = None if next_pred is None else relative_prediction(next_pred, next_state, n)
+            next_action = self.actor_target(next_obs, next_mask, rel)
+            q_next = self.critic_target(next_state, next_alive, next_action, next_pred)
+            keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
+            y = reward + cfg.gamma * keep * q_next
+        q = self.critic(state, alive, action, pred)
+        critic_loss = masked_mean((q - y) ** 2, alive)
+        stats["critic_grad"] = optimise(
+            self.opt_critic, critic_loss, self.critic.parameters(), cfg.grad_clip
+        )
+
+        # Actor (eq. 4): in each sample one alive pursuer acts with the current actor, the
+        # others keep their stored actions (as MADDPG's per-agent gradient).
+        obs, mask = pursuer_obs(state, alive)
+        pick = torch.multinomial(alive.float() + 1e-6, 1, generator=gen).squeeze(1)
+        b = torch.arange(len(row), device=state.device)
+        rel = None if pred is None else relative_prediction(pred, state, n)[b, pick]
+        own = self.actor.act_one(obs[b, pick], mask[b, pick], rel, pick)
+        chosen = torch.nn.functional.one_hot(pick, n).bool().unsqueeze(-1)
+        new_action = torch.where(chosen, own.unsqueeze(1), action)
+        for p in self.critic.parameters():
+            p.requires_grad_(False)
+        q_pi = self.critic(state, alive, new_action, pred)[b, pick]
+        for p in self.critic.parameters():
+            p.requires_grad_(True)
+        picked_alive = alive[b, pick]
+        reg = masked_mean((own**2).sum(-1), picked_alive)
+        actor_loss = -masked_mean(q_pi, picked_alive) + cfg.action_reg * reg
+        optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
+
+        soft_update(self.actor_target, self.actor, cfg.tau)
+        soft_update(self.critic_target, self.critic, cfg.tau)
+        stats.update(
+            critic_loss=float(critic_loss.detach()),
+            actor_loss=float(actor_loss.detach()),
+            q_mean=float(masked_mean(q.detach(), alive)),
+        )
+        return stats
+
+    def update_tp(self, gen: torch.Generator) -> dict[str, float]:
+        """One supervised TP Net step (eq. 7) on J windows; FDE/ADE in arena units."""
+        cfg, buf, k = self.cfg, self.buffer, self.cfg.horizon
+        row, env = buf.sample_index(cfg.tp_batch_size, gen, past=self.history - 1, future=k)
+        valid = buf.same_episode_ahead(row, env, k)
+        hist = frames(buf.window("state", row, env, self.history))
+        target = torch.stack(
+            [buf.get("state", row, env, j)[:, -1, :2] for j in range(1, k + 1)], dim=1
+        )
+        pred = self.tp(hist)
+        err = ((pred - target) ** 2).sum(-1)  # (B, k) squared distance
+        loss = masked_mean(err.mean(-1), valid)
+        optimise(self.opt_tp, loss, self.tp.parameters(), self.cfg.grad_clip)
+        with torch.no_grad():
+            dist = err.sqrt()
+            fde = masked_mean(dist[:, -1], valid)
+            ade = masked_mean(dist.mean(-1), valid)
+        return {"tp_loss": float(loss.detach()), "tp_fde": float(fde), "tp_ade": float(ade)}
+
+    # --- saving ----------------------------------------------------------------------------------
+    def modules(self) -> dict[str, nn.Module]:
+        out = {
+            "actor": self.actor,
+            "critic": self.critic,
+            "actor_target": self.actor_target,
+            "critic_target": self.critic_target,
+        }
+        if self.tp is not None:
+            out["tp"] = self.tp
+        return out
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        out = {"actor": self.opt_actor, "critic": self.opt_critic}
+        if self.opt_tp is not None:
+            out["tp"] = self.opt_tp
+        return out
+
+    def policy_modules(self) -> dict[str, nn.Module]:
+        """What a deployed policy needs (shipped models hold only these)."""
+        out = {"actor": self.actor}
+        if self.tp is not None:
+            out["tp"] = self.tp
+        return out
+
+    @staticmethod
+    def build_policy(cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[CBCTPPolicy, dict]:
+        """An untrained policy of this architecture, and its modules by name (to load into)."""
+        actor = PursuerActors(cfg, env_cfg.num_pursuers).to(device)
+        tp = TPNet(cfg.tp_hidden, cfg.tp_layers, cfg.horizon).to(device) if cfg.use_tp else None
+        modules = {"actor": actor} | ({"tp": tp} if tp is not None else {})
+        return CBCTPPolicy(actor, tp), modules

@@ -1,0 +1,281 @@
+"""``TrainConfig``: every setting of a training run, with the ``paper`` and ``quick`` presets.
+
+A run's configuration is built in layers: the dataclass defaults, then the preset of its
+algorithm and budget (:data:`PRESETS`), then a YAML file (``--config``), then ``--set
+key=value`` overrides. Scenario settings go under ``env`` (``--set env.disturbance=true``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from pes.config import from_dict, to_dict
+from pes.errors import ConfigError
+from pes.sim.config import EnvConfig
+
+Budget = Literal["paper", "quick", "tiny"]
+
+
+@dataclass
+class TrainConfig:
+    """A training run. Times are in minutes, rates in transitions (one environment step of one
+    environment is one transition)."""
+
+    algo: str = "cbc-tp"
+    """Algorithm (see ``pes train --help``)."""
+    preset: Budget = "quick"
+    """Budget preset applied under the user's settings: ``paper`` (the paper's settings),
+    ``quick`` (tuned to learn on a laptop CPU) or ``tiny`` (tests)."""
+    env: dict[str, Any] = field(default_factory=dict)
+    """Scenario settings (:class:`pes.EnvConfig` keys) for the training environments."""
+    seed: int = 0
+    """Seed of the environments, the network initialisation, the noise and the sampling."""
+    device: str = "cpu"
+    """``cpu`` or ``cuda``."""
+    threads: int = 0
+    """Torch CPU threads (0 = torch's default)."""
+    compile_env: bool = True
+    """Fuse the simulator step with ``torch.compile`` (eager fallback if it fails)."""
+
+    # --- budget ------------------------------------------------------------------------------
+    episodes: int = 4000
+    """Training episodes (finished episodes, summed over all environments)."""
+    time_limit: float = 0.0
+    """Stop after this many minutes of training (0 = no limit); a checkpoint is written."""
+    num_envs: int = 1
+    """Environments collected from at once."""
+
+    # --- networks (Table II) -------------------------------------------------------------------
+    hidden: int = 256
+    """Units of the actor's and the critic's bidirectional LSTM (each direction)."""
+    mlp_hidden: int = 64
+    """Units of the MLP after the LSTM."""
+    tp_hidden: int = 256
+    """Units of each TP Net LSTM layer."""
+    tp_layers: int = 2
+    """TP Net LSTM layers."""
+    horizon: int = 3
+    """k: future evader positions TP Net predicts (the actor sees 2k numbers)."""
+    use_tp: bool = True
+    """Use TP Net (False gives CBC Net, the ablation of §V-C)."""
+    shared: bool = True
+    """One actor and one critic for all pursuers (False: one per pursuer, as Algorithm 1)."""
+
+    # --- learning (§V-A) -----------------------------------------------------------------------
+    gamma: float = 0.95
+    lr_actor: float = 1e-3
+    lr_critic: float = 1e-3
+    lr_tp: float = 1e-3
+    tau: float = 1e-2
+    """Soft target update rate."""
+    buffer_size: int = 1_000_000
+    """Transitions kept in the replay buffer."""
+    batch_size: int = 512
+    """Minibatch of the critic and actor updates (M)."""
+    tp_batch_size: int = 512
+    """Minibatch of the TP Net updates (J)."""
+    update_every: int = 50
+    """Collected transitions per gradient update (the paper updates every 50)."""
+    warmup: int = 5000
+    """Transitions collected before the first update."""
+    grad_clip: float = 1.0
+    """Gradient norm clip (0 = none)."""
+    action_reg: float = 1e-3
+    """Weight of the actions' squared magnitude in the actor loss."""
+
+    # --- exploration -----------------------------------------------------------------------------
+    noise_theta: float = 0.15
+    noise_sigma: float = 0.2
+    """OU noise scale at the start of training."""
+    noise_sigma_final: float = 0.2
+    """OU noise scale reached (linearly) after ``noise_decay`` of the episodes."""
+    noise_decay: float = 0.5
+    """Fraction of the episodes over which the noise scale decays."""
+
+    # --- opponent (evader training) ---
+    opponent: str = "pid-pf"
+    """Pursuers the DDPG evader trains against (``pid-pf`` or ``random``)."""
+
+    # --- logging and checkpoints ---
+    log_every: int = 100
+    """Episodes per log row (success rate every 100 episodes, as Fig. 6)."""
+    checkpoint_every: float = 5.0
+    """Minutes between checkpoints (one is also written at the end)."""
+    checkpoint_buffer: bool = True
+    """Save the replay buffer's contents in checkpoints (exact resumption)."""
+    eval_episodes: int = 100
+    """Episodes of the evaluation at the end of training (0 = none)."""
+    tensorboard: bool = True
+    """Also write TensorBoard logs (needs the ``tensorboard`` package)."""
+
+    def validate(self) -> None:
+        from pes.algos import ALGOS  # noqa: PLC0415 - the registry imports this module
+
+        if self.algo not in ALGOS:
+            raise ConfigError(f"algo must be one of {', '.join(ALGOS)}, got '{self.algo}'")
+        positive = (
+            "episodes",
+            "num_envs",
+            "hidden",
+            "mlp_hidden",
+            "tp_hidden",
+            "tp_layers",
+            "horizon",
+            "buffer_size",
+            "batch_size",
+            "tp_batch_size",
+            "update_every",
+            "log_every",
+        )
+        for name in positive:
+            if getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in (
+            "time_limit",
+            "warmup",
+            "grad_clip",
+            "action_reg",
+            "noise_sigma",
+            "noise_sigma_final",
+            "checkpoint_every",
+            "eval_episodes",
+            "threads",
+        ):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
+        if not 0.0 <= self.gamma < 1.0:
+            raise ConfigError(f"gamma must be in [0, 1), got {self.gamma}")
+        if not 0.0 < self.tau <= 1.0:
+            raise ConfigError(f"tau must be in (0, 1], got {self.tau}")
+        if not 0.0 < self.noise_decay <= 1.0:
+            raise ConfigError(f"noise_decay must be in (0, 1], got {self.noise_decay}")
+        if self.buffer_size < 2 * self.num_envs:
+            raise ConfigError("buffer_size must hold at least two steps of every environment")
+        if self.device not in ("cpu", "cuda"):
+            raise ConfigError(f"device must be cpu or cuda, got '{self.device}'")
+        if self.opponent not in ("pid-pf", "random"):
+            raise ConfigError(f"opponent must be pid-pf or random, got '{self.opponent}'")
+        self.env_config()  # checks the scenario keys
+
+    def env_config(self) -> EnvConfig:
+        """The training scenario."""
+        return EnvConfig.from_dict(dict(self.env))
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_dict(self)
+
+
+PAPER = dict(
+    episodes=4000,
+    num_envs=1,
+    hidden=256,
+    mlp_hidden=64,
+    tp_hidden=256,
+    gamma=0.95,
+    lr_actor=1e-3,
+    lr_critic=1e-3,
+    lr_tp=1e-3,
+    tau=1e-2,
+    buffer_size=1_000_000,
+    batch_size=512,
+    tp_batch_size=512,
+    update_every=50,
+    warmup=5000,
+)
+"""The paper's settings (§V-A), shared by every algorithm's ``paper`` preset."""
+
+PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    "cbc-tp": {
+        "paper": PAPER,
+        "quick": dict(
+            episodes=3000,
+            num_envs=32,
+            hidden=64,
+            mlp_hidden=64,
+            tp_hidden=64,
+            lr_actor=5e-4,
+            lr_critic=1e-3,
+            lr_tp=1e-3,
+            buffer_size=300_000,
+            batch_size=256,
+            tp_batch_size=256,
+            update_every=16,
+            warmup=10_000,
+            noise_sigma=0.3,
+            noise_sigma_final=0.05,
+            noise_decay=0.6,
+            time_limit=60.0,
+        ),
+        "tiny": dict(
+            episodes=40,
+            num_envs=8,
+            hidden=32,
+            mlp_hidden=32,
+            tp_hidden=32,
+            buffer_size=20_000,
+            batch_size=64,
+            tp_batch_size=64,
+            update_every=8,
+            warmup=500,
+            log_every=10,
+            eval_episodes=20,
+            checkpoint_every=0.5,
+            env=dict(max_steps=100),
+        ),
+    },
+    "evader-ddpg": {
+        "paper": dict(PAPER, hidden=128),
+        "quick": dict(
+            episodes=1500,
+            num_envs=32,
+            hidden=128,
+            lr_actor=5e-4,
+            lr_critic=1e-3,
+            buffer_size=300_000,
+            batch_size=256,
+            update_every=16,
+            warmup=10_000,
+            noise_sigma=0.3,
+            noise_sigma_final=0.05,
+            noise_decay=0.6,
+            time_limit=20.0,
+        ),
+        "tiny": dict(
+            episodes=40,
+            num_envs=8,
+            hidden=32,
+            buffer_size=20_000,
+            batch_size=64,
+            update_every=8,
+            warmup=500,
+            log_every=10,
+            eval_episodes=20,
+            checkpoint_every=0.5,
+            env=dict(max_steps=100),
+        ),
+    },
+}
+PRESETS["cbc"] = {name: dict(values, use_tp=False) for name, values in PRESETS["cbc-tp"].items()}
+
+
+def build_train_config(
+    algo: str, preset: str = "quick", values: dict[str, Any] | None = None
+) -> TrainConfig:
+    """The configuration of ``algo`` under ``preset``, with ``values`` applied on top.
+
+    ``values`` may hold an ``env`` mapping, merged key by key into the preset's.
+    """
+    if algo not in PRESETS:
+        raise ConfigError(f"algo must be one of {', '.join(sorted(PRESETS))}, got '{algo}'")
+    if preset not in PRESETS[algo]:
+        raise ConfigError(f"preset must be one of {', '.join(PRESETS[algo])}, got '{preset}'")
+    merged: dict[str, Any] = dict(PRESETS[algo][preset])
+    merged["env"] = dict(merged.get("env", {}))
+    values = dict(values or {})
+    if not isinstance(values.get("env", {}), dict):
+        raise ConfigError("env must be a mapping of scenario keys to values")
+    merged["env"].update(values.pop("env", {}))
+    merged.update(values)
+    merged["algo"], merged["preset"] = algo, preset
+    return from_dict(TrainConfig, merged)

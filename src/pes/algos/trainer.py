@@ -1,0 +1,356 @@
+"""The training loop every off-policy learner shares: batched collection, updates, logging,
+checkpoints and resumption.
+
+A run lives in one folder::
+
+    OUT/config.yaml      the resolved TrainConfig
+    OUT/progress.csv     one row per ``log_every`` episodes (success rate, average reward,
+                         episode steps, losses, TP Net FDE/ADE, env-steps/s, updates/s, ...)
+    OUT/tb/              the same as TensorBoard scalars
+    OUT/checkpoint.pt    the latest checkpoint (written atomically)
+    OUT/policy.pt        the trained policy (at the end)
+    OUT/eval.json        its evaluation (at the end)
+
+``train(cfg, out, resume=True)`` continues from ``checkpoint.pt``: networks, optimisers, replay
+buffer, noise, RNG states and counters come back; environments start fresh episodes (the
+episodes in flight when the run stopped are not counted).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from tqdm import tqdm
+
+from pes.algos import ALGOS, PURSUER_ALGOS
+from pes.algos.config import TrainConfig
+from pes.algos.io import (
+    CHECKPOINT_FORMAT,
+    POLICY_FORMAT,
+    VERSION,
+    load_file,
+    load_modules,
+    save_atomic,
+)
+from pes.config import save_yaml, to_dict
+from pes.errors import CheckpointError, ConfigError
+from pes.evaluate import evaluate
+from pes.sim.env import make_env
+
+LOG_COLUMNS = (
+    "episodes",
+    "env_steps",
+    "updates",
+    "wall_s",
+    "success_rate",
+    "avg_reward",
+    "episode_steps",
+    "crashes",
+    "noise",
+    "critic_loss",
+    "actor_loss",
+    "q_mean",
+    "tp_loss",
+    "tp_fde",
+    "tp_ade",
+    "env_steps_per_s",
+    "updates_per_s",
+)
+"""Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) reward
+divided by its steps, averaged over the row's episodes (SPEC §4)."""
+
+# Changing these between a run and its resumption is allowed; anything else is a mismatch.
+RESUMABLE_CHANGES = {
+    "episodes",
+    "time_limit",
+    "checkpoint_every",
+    "eval_episodes",
+    "device",
+    "threads",
+    "compile_env",
+    "tensorboard",
+}
+
+
+@dataclass
+class Progress:
+    episodes: int = 0
+    env_steps: int = 0
+    updates: int = 0
+    wall_s: float = 0.0
+    update_credit: float = 0.0
+
+
+class RunLogger:
+    """CSV (and TensorBoard, when installed) logs of a run."""
+
+    def __init__(self, out: Path, tensorboard: bool, resume: bool) -> None:
+        self.path = out / "progress.csv"
+        new = not (resume and self.path.exists())
+        self.file = open(self.path, "w" if new else "a", newline="")  # noqa: SIM115
+        self.writer = csv.DictWriter(self.file, fieldnames=LOG_COLUMNS)
+        if new:
+            self.writer.writeheader()
+        self.tb = None
+        if tensorboard:
+            try:
+                from torch.utils.tensorboard import SummaryWriter  # noqa: PLC0415
+
+                self.tb = SummaryWriter(str(out / "tb"))
+            except ImportError:
+                self.tb = None
+
+    def write(self, row: dict[str, float]) -> None:
+        self.writer.writerow({k: row.get(k, "") for k in LOG_COLUMNS})
+        self.file.flush()
+        if self.tb is not None:
+            for k, v in row.items():
+                if k != "episodes" and isinstance(v, (int, float)) and math.isfinite(v):
+                    self.tb.add_scalar(k, v, row["episodes"])
+            self.tb.flush()
+
+    def close(self) -> None:
+        self.file.close()
+        if self.tb is not None:
+            self.tb.close()
+
+
+def _rng_state(gen: torch.Generator) -> dict[str, Any]:
+    return {"torch": torch.get_rng_state(), "sampler": gen.get_state()}
+
+
+def _check_resumable(saved: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
+    now = to_dict(cfg)
+    diff = sorted(k for k in now if k not in RESUMABLE_CHANGES and saved.get(k) != now[k])
+    if diff:
+        raise CheckpointError(
+            f"'{path}' was trained with different settings ({', '.join(diff)}); resume with "
+            "the same configuration or start a new --out folder"
+        )
+
+
+def noise_scale(cfg: TrainConfig, episodes: int) -> float:
+    """The OU noise scale after ``episodes`` episodes: linear from ``noise_sigma`` to
+    ``noise_sigma_final`` over the first ``noise_decay`` of the run."""
+    frac = min(1.0, episodes / max(1.0, cfg.noise_decay * cfg.episodes))
+    return cfg.noise_sigma + (cfg.noise_sigma_final - cfg.noise_sigma) * frac
+
+
+def train(
+    cfg: TrainConfig, out: str | Path, resume: bool = False, progress: bool = True
+) -> dict[str, Any]:
+    """Train ``cfg.algo`` into the folder ``out``; returns a summary (and writes it to
+    ``out/summary.json``)."""
+    out = Path(out)
+    ckpt_path = out / "checkpoint.pt"
+    if resume and not ckpt_path.is_file():
+        raise CheckpointError(f"nothing to resume: no checkpoint at '{ckpt_path}'")
+    if not resume and ckpt_path.exists():
+        raise ConfigError(
+            f"'{out}' already holds a run; pass --resume to continue it or choose another --out"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    device = torch.device(cfg.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device 'cuda' asked for, but no CUDA GPU is available")
+
+    torch.manual_seed(cfg.seed)
+    learner_cls = ALGOS[cfg.algo]
+    env_cfg = learner_cls.adapt_env(cfg.env_config())
+    learner = learner_cls(cfg, env_cfg, device)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    prog = Progress()
+    if resume:
+        ckpt = load_file(ckpt_path, CHECKPOINT_FORMAT)
+        _check_resumable(ckpt["train_config"], cfg, ckpt_path)
+        load_modules(learner.modules(), ckpt["modules"], str(ckpt_path))
+        for name, opt in learner.optimizers().items():
+            opt.load_state_dict(ckpt["optimizers"][name])
+        if "buffer" in ckpt:
+            learner.buffer.load_state_dict(ckpt["buffer"])
+        learner.noise.load_state_dict(ckpt["noise"])
+        torch.set_rng_state(ckpt["rng"]["torch"])
+        gen.set_state(ckpt["rng"]["sampler"])
+        prog = Progress(**ckpt["progress"])
+    save_yaml(cfg, out / "config.yaml")
+
+    def checkpoint() -> None:
+        payload = {
+            "format": CHECKPOINT_FORMAT,
+            "version": VERSION,
+            "algo": cfg.algo,
+            "train_config": to_dict(cfg),
+            "env_config": to_dict(env_cfg),
+            "modules": {k: m.state_dict() for k, m in learner.modules().items()},
+            "optimizers": {k: o.state_dict() for k, o in learner.optimizers().items()},
+            "noise": learner.noise.state_dict(),
+            "rng": _rng_state(gen),
+            "progress": vars(prog).copy(),
+        }
+        if cfg.checkpoint_buffer:
+            payload["buffer"] = learner.buffer.state_dict()
+        save_atomic(payload, ckpt_path)
+
+    # Each (re)start plays fresh episodes: seed by the episodes already played.
+    env = make_env(
+        env_cfg,
+        num_envs=cfg.num_envs,
+        device=device,
+        seed=cfg.seed * 1_000_003 + prog.episodes,
+        compile=cfg.compile_env,
+    )
+    obs, info = env.reset()
+    learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=device))
+    logger = RunLogger(out, cfg.tensorboard, resume)
+    window: dict[str, list] = {"success": [], "steps": [], "reward": [], "crashes": []}
+    stats_sum: dict[str, float] = {}
+    stats_count = 0
+    reward_sum = torch.zeros(cfg.num_envs, device=device)
+    start = time.perf_counter()
+    wall0 = prog.wall_s
+    last_ckpt = start
+    row_start = (start, prog.env_steps, prog.updates)
+    next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
+    deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
+    bar = tqdm(
+        total=cfg.episodes,
+        initial=min(prog.episodes, cfg.episodes),
+        unit="ep",
+        desc=f"train {cfg.algo}",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
+    stopped_by = "episodes"
+    try:
+        while prog.episodes < cfg.episodes:
+            scale = noise_scale(cfg, prog.episodes)
+            actions, evader_actions = learner.act(obs, info, scale, gen)
+            alive = info["obs_mask"][:, :, 0].float()
+            obs2, reward, terminated, truncated, info2 = env.step(actions, evader_actions)
+            learner.record(info, actions, evader_actions, reward, terminated, info2)
+            reward_sum += (reward * alive).sum(-1) / alive.sum(-1).clamp(min=1.0)
+            prog.env_steps += cfg.num_envs
+            done = terminated | truncated
+            if bool(done.any()):
+                idx = torch.nonzero(done).flatten()
+                steps = info2["steps"][idx].float()
+                window["success"] += info2["success"][idx].tolist()
+                window["steps"] += steps.tolist()
+                window["reward"] += (reward_sum[idx] / steps).tolist()
+                window["crashes"] += info2["crashes"][idx].tolist()
+                reward_sum[idx] = 0.0
+                learner.episode_reset(done)
+                prog.episodes += len(idx)
+                bar.update(len(idx))
+            obs, info = obs2, info2
+
+            if learner.ready():
+                prog.update_credit += cfg.num_envs / cfg.update_every
+                while prog.update_credit >= 1.0:
+                    for k, v in learner.update(gen).items():
+                        stats_sum[k] = stats_sum.get(k, 0.0) + v
+                    stats_count += 1
+                    prog.updates += 1
+                    prog.update_credit -= 1.0
+
+            now = time.perf_counter()
+            prog.wall_s = wall0 + now - start
+            if prog.episodes >= next_row and window["success"]:
+                dt = max(now - row_start[0], 1e-9)
+                row = {
+                    "episodes": prog.episodes,
+                    "env_steps": prog.env_steps,
+                    "updates": prog.updates,
+                    "wall_s": round(prog.wall_s, 1),
+                    "success_rate": sum(window["success"]) / len(window["success"]),
+                    "avg_reward": sum(window["reward"]) / len(window["reward"]),
+                    "episode_steps": sum(window["steps"]) / len(window["steps"]),
+                    "crashes": sum(window["crashes"]) / len(window["crashes"]),
+                    "noise": scale,
+                    "env_steps_per_s": (prog.env_steps - row_start[1]) / dt,
+                    "updates_per_s": (prog.updates - row_start[2]) / dt,
+                }
+                row.update({k: v / stats_count for k, v in stats_sum.items() if stats_count})
+                logger.write(row)
+                bar.set_postfix(
+                    success=f"{row['success_rate']:.2f}",
+                    steps=f"{row['episode_steps']:.0f}",
+                    reward=f"{row['avg_reward']:.3f}",
+                )
+                window = {k: [] for k in window}
+                stats_sum, stats_count = {}, 0
+                row_start = (now, prog.env_steps, prog.updates)
+                next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
+            if cfg.checkpoint_every > 0 and now - last_ckpt >= cfg.checkpoint_every * 60.0:
+                checkpoint()
+                last_ckpt = time.perf_counter()
+            if prog.wall_s >= deadline:
+                stopped_by = "time_limit"
+                break
+    finally:
+        bar.close()
+        logger.close()
+    checkpoint()
+
+    policy = {k: m.state_dict() for k, m in learner.policy_modules().items()}
+    meta = {
+        "episodes": prog.episodes,
+        "env_steps": prog.env_steps,
+        "updates": prog.updates,
+        "wall_s": round(prog.wall_s, 1),
+        "seed": cfg.seed,
+        "stopped_by": stopped_by,
+        "torch": str(torch.__version__),
+    }
+    save_atomic(
+        {
+            "format": POLICY_FORMAT,
+            "version": VERSION,
+            "algo": cfg.algo,
+            "train_config": to_dict(cfg),
+            "env_config": to_dict(env_cfg),
+            "policy": policy,
+            "meta": meta,
+        },
+        out / "policy.pt",
+    )
+    summary: dict[str, Any] = {"algo": cfg.algo, "out": str(out), **meta}
+    if cfg.eval_episodes > 0:
+        summary["eval"] = evaluate_run(out / "policy.pt", cfg, cfg.eval_episodes, progress)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: bool) -> dict:
+    """Evaluate a trained policy under the paper's protocol (disturbance on, crashes disable):
+    pursuers against the training evader; a DDPG evader against PID(PF) pursuers."""
+    from pes.algos.policy import load_pursuer_policy  # noqa: PLC0415
+    from pes.policies import SCRIPTED  # noqa: PLC0415
+
+    env_cfg = cfg.env_config().replace(disturbance=True, crash_mode="disable")
+    if cfg.algo in PURSUER_ALGOS:
+        policy, _ = load_pursuer_policy(policy_path, env_cfg, cfg.device)
+        opponent = env_cfg.evader_policy
+    else:
+        env_cfg = env_cfg.replace(evader_policy="ddpg", evader_model=str(policy_path))
+        policy = SCRIPTED[cfg.opponent]()
+        opponent = cfg.opponent
+    result = evaluate(
+        policy,
+        env_cfg,
+        episodes=episodes,
+        num_envs=min(episodes, 100),
+        seed=10_000 + cfg.seed,
+        device=cfg.device,
+        progress=progress,
+    )
+    return {"opponent": opponent, **result.summary()}
