@@ -189,7 +189,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "cbc-tp": {
         "paper": PAPER,
         "quick": dict(
-            episodes=3000,
+            episodes=2500,
             num_envs=32,
             hidden=64,
             mlp_hidden=64,
@@ -200,7 +200,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
             buffer_size=300_000,
             batch_size=256,
             tp_batch_size=256,
-            update_every=16,
+            update_every=32,
             warmup=10_000,
             noise_sigma=0.3,
             noise_sigma_final=0.05,
