@@ -82,6 +82,18 @@ def _non_negative(text: str) -> int:
     return value
 
 
+def _shipped(name: str) -> bool:
+    from pes.algos.io import MODELS_DIR, SHIPPED
+
+    return (MODELS_DIR / SHIPPED[name]).is_file()
+
+
+def _opponent() -> dict[str, Any]:
+    """The default evader of evaluations: the shipped DDPG evader, as in the paper (``flee``
+    if this installation has none)."""
+    return {"evader_policy": "ddpg"} if _shipped("evader-ddpg") else {}
+
+
 # --- policies --------------------------------------------------------------------------------
 
 
@@ -107,14 +119,26 @@ def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "
     from pes.sim.env import make_env
 
     env = make_env(config, num_envs=1, device=device, seed=seed)
-    policy = make_policy(policy_name, config, seed=seed)
+    policy = make_policy(policy_name, config, seed=seed, device=device)
     obs, info = env.reset(seed=seed)
     recorder = EpisodeRecorder(env)
-    recorder.start()
+    arena = torch.tensor([config.arena_width, config.arena_height])
+
+    def act():  # the actions, and the evader positions the policy predicts (m), if any
+        actions = policy(obs, info)
+        pred = getattr(policy, "last_prediction", None)
+        return actions, None if pred is None else pred[0] * arena
+
     with torch.no_grad():
+        actions, pred = act()
+        recorder.start(pred)
         while not recorder.finished:
-            obs, _, _, _, info = env.step(policy(obs, info))
-            recorder.add(info)
+            obs, _, terminated, truncated, info = env.step(actions)
+            if bool(terminated[0] | truncated[0]):  # obs is already the next episode's
+                recorder.add(info)
+            else:
+                actions, pred = act()
+                recorder.add(info, pred)
     return recorder.record()
 
 
@@ -125,7 +149,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from pes.record import save_gif, save_record
 
     start = time.time()
-    config = _scenario(args, disturbance=True, crash_mode="disable")
+    config = _scenario(args, disturbance=True, crash_mode="disable", **_opponent())
+    if args.policy is None:
+        args.policy = "cbc-tp" if _shipped("cbc-tp") else "pid-pf"
     out = Path(args.out)
     record = _run_episode(config, args.policy, args.seed)
     record_path = save_record(record, out / "episode.json")
@@ -158,7 +184,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     from pes.evaluate import evaluate
 
-    defaults: dict[str, Any] = {"crash_mode": "disable"}
+    defaults: dict[str, Any] = {"crash_mode": "disable", **_opponent()}
     if args.disturbance:
         defaults["disturbance"] = True
     if args.damaged is not None:
@@ -203,7 +229,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     suffix = out.suffix.lower()
     if suffix not in (".gif", ".json"):
         raise ConfigError(f"--out must end in .gif or .json, got '{out.name}'")
-    config = _scenario(args, crash_mode="disable")
+    config = _scenario(args, crash_mode="disable", **_opponent())
     written = []
     for k in range(args.episodes):
         record = _run_episode(config, args.policy, args.seed + k)
@@ -306,7 +332,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", default="pes-demo", help="output folder (default: pes-demo)")
     p.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
-    p.add_argument("--policy", default="pid-pf", help=argparse.SUPPRESS)
+    p.add_argument(
+        "--policy",
+        default=None,
+        help="pursuer policy (default: the shipped cbc-tp swarm, or pid-pf without one)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_demo)

@@ -312,6 +312,11 @@ class CBCTP:
             ade = masked_mean(dist.mean(-1), valid)
         return {"tp_loss": float(loss.detach()), "tp_fde": float(fde), "tp_ade": float(ade)}
 
+    @staticmethod
+    def score(success_rate: float, episode_steps: float) -> float:
+        """Training score of a log row (higher is better): success, then speed."""
+        return success_rate - 1e-5 * episode_steps
+
     # --- saving ----------------------------------------------------------------------------------
     def modules(self) -> dict[str, nn.Module]:
         out = {

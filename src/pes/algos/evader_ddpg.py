@@ -110,6 +110,12 @@ class EvaderDDPG:
             "q_mean": float(q.detach().mean()),
         }
 
+    @staticmethod
+    def score(success_rate: float, episode_steps: float) -> float:
+        """Training score of a log row (higher is better): the pursuers' failure, then the
+        evader's survival time."""
+        return -success_rate + 1e-5 * episode_steps
+
     def modules(self) -> dict[str, nn.Module]:
         return {
             "actor": self.actor,

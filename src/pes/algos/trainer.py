@@ -9,7 +9,10 @@ A run lives in one folder::
     OUT/tb/              the same as TensorBoard scalars
     OUT/checkpoint.pt    the latest checkpoint (written atomically)
     OUT/policy.pt        the trained policy (at the end)
-    OUT/eval.json        its evaluation (at the end)
+    OUT/best_policy.pt   the policy at the log row with the best training score so far
+                         (pursuers: highest success rate, then fewest steps; the evader:
+                         the lowest pursuer success rate, then the most steps)
+    OUT/summary.json     counters and the evaluation of policy.pt and best_policy.pt
 
 ``train(cfg, out, resume=True)`` continues from ``checkpoint.pt``: networks, optimisers, replay
 buffer, noise, RNG states and counters come back; environments start fresh episodes (the
@@ -86,6 +89,7 @@ class Progress:
     updates: int = 0
     wall_s: float = 0.0
     update_credit: float = 0.0
+    best_score: float = -math.inf
 
 
 class RunLogger:
@@ -93,11 +97,12 @@ class RunLogger:
 
     def __init__(self, out: Path, tensorboard: bool, resume: bool) -> None:
         self.path = out / "progress.csv"
-        new = not (resume and self.path.exists())
+        new = not (resume and self.path.exists() and self.path.stat().st_size > 0)
         self.file = open(self.path, "w" if new else "a", newline="")  # noqa: SIM115
         self.writer = csv.DictWriter(self.file, fieldnames=LOG_COLUMNS)
         if new:
             self.writer.writeheader()
+            self.file.flush()
         self.tb = None
         if tensorboard:
             try:
@@ -200,6 +205,31 @@ def train(
             payload["buffer"] = learner.buffer.state_dict()
         save_atomic(payload, ckpt_path)
 
+    def meta() -> dict[str, Any]:
+        return {
+            "episodes": prog.episodes,
+            "env_steps": prog.env_steps,
+            "updates": prog.updates,
+            "wall_s": round(prog.wall_s, 1),
+            "seed": cfg.seed,
+            "torch": str(torch.__version__),
+        }
+
+    def save_policy(path: Path, info: dict[str, Any]) -> None:
+        policy = {k: m.state_dict() for k, m in learner.policy_modules().items()}
+        save_atomic(
+            {
+                "format": POLICY_FORMAT,
+                "version": VERSION,
+                "algo": cfg.algo,
+                "train_config": to_dict(cfg),
+                "env_config": to_dict(env_cfg),
+                "policy": policy,
+                "meta": info,
+            },
+            path,
+        )
+
     # Each (re)start plays fresh episodes: seed by the episodes already played.
     env = make_env(
         env_cfg,
@@ -281,6 +311,10 @@ def train(
                 }
                 row.update({k: v / stats_count for k, v in stats_sum.items() if stats_count})
                 logger.write(row)
+                score = learner.score(row["success_rate"], row["episode_steps"])
+                if score > prog.best_score:
+                    prog.best_score = score
+                    save_policy(out / "best_policy.pt", {**meta(), "best_at": prog.episodes})
                 bar.set_postfix(
                     success=f"{row['success_rate']:.2f}",
                     steps=f"{row['episode_steps']:.0f}",

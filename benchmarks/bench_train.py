@@ -1,0 +1,132 @@
+"""Training throughput of the learners: where a training step's time goes.
+
+    python benchmarks/bench_train.py                 # CPU: benchmarks/results/train_cpu.json
+    python benchmarks/bench_train.py --device cuda --out benchmarks/results/train_cuda.json
+
+For each algorithm and preset it measures, after a warm-up that fills the replay buffer:
+
+* ``collect_env_steps_per_s``: acting (TP Net + actor on every pursuer, OU noise), the fused
+  simulator step and storing the transitions, with no gradient updates;
+* ``update_ms``: one gradient update, and its parts (``tp_update_ms``, TP Net's supervised step;
+  the rest is the critic, the actor and the soft target updates);
+* ``train_env_steps_per_s``: what a run achieves with the preset's ``update_every``
+  (one update per that many transitions): 1 / (1 / collect + update_s / update_every);
+* ``bytes_per_transition`` of the replay buffer and what 1e6 transitions take.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import torch
+
+from pes.algos import ALGOS
+from pes.algos.config import build_train_config
+from pes.sim.bench import machine_info
+from pes.sim.env import make_env
+
+
+def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
+    cfg = build_train_config(algo, preset, {"device": device})
+    env_cfg = ALGOS[algo].adapt_env(cfg.env_config())
+    torch.manual_seed(0)
+    learner = ALGOS[algo](cfg, env_cfg, torch.device(device))
+    env = make_env(env_cfg, num_envs=cfg.num_envs, device=device, seed=0, compile=True)
+    gen = torch.Generator().manual_seed(0)
+    obs, info = env.reset()
+    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+
+    def collect(steps: int) -> None:
+        nonlocal obs, info
+        for _ in range(steps):
+            actions, evader = learner.act(obs, info, 0.2, gen)
+            obs2, reward, terminated, truncated, info2 = env.step(actions, evader)
+            learner.record(info, actions, evader, reward, terminated, info2)
+            obs, info = obs2, info2
+
+    need = max(cfg.warmup, cfg.batch_size, cfg.tp_batch_size) // cfg.num_envs + 20
+    collect(need)  # compiles the step and fills the buffer past the warm-up
+    sync()
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        collect(20)
+        steps += 20
+    sync()
+    collect_rate = steps * cfg.num_envs / (time.perf_counter() - start)
+
+    for _ in range(3):
+        learner.update(gen)
+    updates, tp_time, start = 0, 0.0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        if hasattr(learner, "update_tp") and learner.tp is not None:
+            t0 = time.perf_counter()
+            learner.update_tp(gen)
+            sync()
+            tp_time += time.perf_counter() - t0
+        learner.update(gen)
+        updates += 1
+    sync()
+    total = time.perf_counter() - start
+    # update() includes one TP step: subtract the extra one timed separately
+    update_s = (total - tp_time) / updates
+    tp_s = tp_time / updates
+    train_rate = 1.0 / (1.0 / collect_rate + update_s / cfg.update_every)
+    per = learner.buffer.bytes_per_transition
+    return {
+        "algo": algo,
+        "preset": preset,
+        "device": device,
+        "num_envs": cfg.num_envs,
+        "num_pursuers": env_cfg.num_pursuers,
+        "hidden": cfg.hidden,
+        "batch_size": cfg.batch_size,
+        "update_every": cfg.update_every,
+        "collect_env_steps_per_s": round(collect_rate, 1),
+        "update_ms": round(update_s * 1000, 2),
+        "tp_update_ms": round(tp_s * 1000, 2) if tp_time else None,
+        "updates_per_s": round(1.0 / update_s, 2),
+        "train_env_steps_per_s": round(train_rate, 1),
+        "update_share_of_time": round(1 - train_rate / collect_rate, 3),
+        "bytes_per_transition": per,
+        "buffer_gb_at_1e6": round(per * 1e6 / 1e9, 3),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--algos", nargs="+", default=["cbc-tp", "cbc", "evader-ddpg"])
+    parser.add_argument("--presets", nargs="+", default=["quick", "paper"])
+    parser.add_argument("--seconds", type=float, default=10.0, help="per measurement")
+    parser.add_argument("--threads", type=int, default=0)
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    rows = []
+    for algo in args.algos:
+        for preset in args.presets:
+            row = measure(algo, preset, args.device, args.seconds)
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+    result = {
+        "machine": machine_info(args.device),
+        "results": rows,
+        "command": "python benchmarks/bench_train.py "
+        + " ".join(
+            f"--{k.replace('_', '-')} {v}"
+            for k, v in vars(args).items()
+            if v is not None and k not in ("algos", "presets")
+        ),
+    }
+    out = Path(args.out or f"benchmarks/results/train_{args.device}.json")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()

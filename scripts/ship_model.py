@@ -1,0 +1,150 @@
+"""Ship a trained policy inside the package, with its model card.
+
+    python scripts/ship_model.py evader-ddpg runs/evader/best_policy.pt \
+        --command "pes train --algo evader-ddpg ..."
+    python scripts/ship_model.py cbc-tp runs/cbc_tp/best_policy.pt --command "pes train ..."
+
+Copies the policy file to ``src/pes/models/``, evaluates it over ``--episodes`` episodes with
+the paper's protocol (disturbance on, ``crash_mode="disable"``), and writes the model card
+(``src/pes/models/NAME.md``) and the raw numbers (``results/shipped_NAME.json``):
+
+* the evader: PID(PF) pursuers against it, beside PID(PF) against the scripted ``flee`` evader;
+* the swarm: against the shipped evader with 0, 1 and 2 pursuers damaged (Table VI), and
+  against ``flee``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: E402
+from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
+from pes.evaluate import evaluate  # noqa: E402
+from pes.policies import PIDPotentialField  # noqa: E402
+from pes.sim.bench import machine_info  # noqa: E402
+from pes.sim.config import EnvConfig  # noqa: E402
+
+PAPER_TABLE_VI = {0: (98.8, 132), 1: (95.6, 212), 2: (86.7, 308)}
+
+
+def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:
+    result = evaluate(policy, cfg, episodes=episodes, num_envs=100, seed=seed, progress=True)
+    return result.summary()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("name", choices=sorted(SHIPPED))
+    parser.add_argument("policy", help="the policy file to ship")
+    parser.add_argument("--command", required=True, help="the exact training command")
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--seed", type=int, default=0, help="evaluation seed")
+    args = parser.parse_args()
+    torch.set_num_threads(2)
+
+    info = describe(args.policy)
+    target = MODELS_DIR / SHIPPED[args.name]
+    shutil.copyfile(args.policy, target)
+    base = EnvConfig(disturbance=True, crash_mode="disable")
+    evals: dict[str, dict] = {}
+    if args.name == "evader-ddpg":
+        pid = PIDPotentialField(base)
+        evals["pid-pf vs ddpg evader"] = run(
+            pid,
+            base.replace(evader_policy="ddpg", evader_model=str(target)),
+            args.episodes,
+            args.seed,
+        )
+        evals["pid-pf vs flee evader"] = run(
+            pid, base.replace(evader_policy="flee"), args.episodes, args.seed
+        )
+    else:
+        evader = base.replace(evader_policy="ddpg")
+        for k in (0, 1, 2):
+            cfg = evader.replace(damaged=k)
+            policy, _ = load_pursuer_policy(target, cfg)
+            evals[f"vs ddpg evader, {k} damaged"] = run(policy, cfg, args.episodes, args.seed)
+        cfg = base.replace(evader_policy="flee")
+        policy, _ = load_pursuer_policy(target, cfg)
+        evals["vs flee evader, 0 damaged"] = run(policy, cfg, args.episodes, args.seed)
+
+    machine = machine_info()
+    meta = info["meta"]
+    record = {
+        "name": args.name,
+        "source": args.policy,
+        "command": args.command,
+        "train_meta": meta,
+        "machine": machine,
+        "evaluations": evals,
+        "eval_command": "python scripts/ship_model.py " + " ".join(sys.argv[1:]),
+    }
+    out = ROOT / "results" / f"shipped_{args.name.replace('-', '_')}.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps(record, indent=2) + "\n")
+
+    cfg = info["train_config"]
+    lines = [
+        f"# Model card: `{args.name}`",
+        "",
+        f"File: `src/pes/models/{SHIPPED[args.name]}` (a PES policy file, format version 1).",
+        "",
+        "## How it was trained",
+        "",
+        f"* command: `{args.command}`",
+        f"* algorithm `{cfg['algo']}`, preset `{cfg['preset']}`, seed {cfg['seed']}; "
+        f"scenario overrides: `{json.dumps(cfg['env'])}`",
+        f"* {meta.get('episodes')} episodes, {meta.get('env_steps')} env steps, "
+        f"{meta.get('updates')} updates, {meta.get('wall_s')} s wall time"
+        + (
+            f"; this file is the best log row's policy (episode {meta['best_at']})"
+            if "best_at" in meta
+            else ""
+        ),
+        f"* hardware: {machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']} "
+        "(CPU)",
+        "",
+        f"## Evaluation ({args.episodes} episodes per row, disturbance on, crashes disable, "
+        f"seed {args.seed})",
+        "",
+        "| setting | success rate | mean steps | average reward | crashes / episode |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for name, ev in evals.items():
+        lines.append(
+            f"| {name} | {100 * ev['success_rate']:.1f} % ± {100 * ev['success_rate_ci95']:.1f} "
+            f"| {ev['mean_steps']:.1f} | {ev['mean_reward']:.3f} | {ev['mean_crashes']:.2f} |"
+        )
+    if args.name == "cbc-tp":
+        lines += [
+            "",
+            "Paper (Table VI, CBC-TP Net): "
+            + ", ".join(f"{k} damaged {s} % / {t} steps" for k, (s, t) in PAPER_TABLE_VI.items())
+            + ".",
+        ]
+    else:
+        lines += ["", "Success rate here is the pursuers' (lower means a stronger evader)."]
+    lines += ["", f"Made by: `{record['eval_command']}`; numbers in `results/{out.name}`.", ""]
+    (MODELS_DIR / f"{SHIPPED[args.name].removesuffix('.pt')}.md").write_text("\n".join(lines))
+    print(
+        json.dumps(
+            {
+                k: {m: v[m] for m in ("success_rate", "mean_steps", "mean_reward")}
+                for k, v in evals.items()
+            },
+            indent=2,
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

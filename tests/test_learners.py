@@ -1,0 +1,275 @@
+"""The shared learning machinery: features rebuilt from the stored global state, the replay
+buffer, the networks across swarm sizes, checkpoints, resumption after SIGKILL, learning."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import torch
+
+import pes
+from pes.algos.buffer import ReplayBuffer
+from pes.algos.cbc_tp import CBCTP
+from pes.algos.config import build_train_config
+from pes.algos.features import frames, pursuer_obs
+from pes.algos.io import save_atomic
+from pes.algos.nets import CBCActor, CBCCritic, TPNet
+from pes.algos.policy import load_pursuer_policy
+from pes.algos.trainer import train
+from pes.cli import main
+from pes.errors import CheckpointError, ConfigError
+from pes.evaluate import evaluate
+
+FAST = dict(compile_env=False, tensorboard=False)
+
+
+def test_observations_rebuilt_from_global_state():
+    cfg = pes.EnvConfig(max_steps=30, damaged=2, crash_mode="disable")
+    env = pes.make_env(cfg, num_envs=4, seed=3)
+    obs, info = env.reset()
+    for _ in range(12):
+        rebuilt, mask = pursuer_obs(info["state"], info["obs_mask"][:, :, 0])
+        assert torch.equal(mask, info["obs_mask"])
+        torch.testing.assert_close(rebuilt, obs, rtol=0, atol=1e-6)
+        obs, _, _, _, info = env.step(torch.rand(4, 5, 2) * 2 - 1)
+
+
+def test_buffer_windows_match_the_environment_history():
+    """History windows cut from the time-major buffer equal the env's own history, across
+    episode ends (zero padding) and ring wrap-around."""
+    cfg = pes.EnvConfig(max_steps=7, history_length=4)
+    env = pes.make_env(cfg, num_envs=3, seed=0)
+    buf = ReplayBuffer(3 * 9, 3, {"state": ((6, 8), torch.float32)})
+    obs, info = env.reset()
+    gen = torch.Generator().manual_seed(0)
+    checked = 0
+    for _ in range(30):
+        before = info
+        obs, _, _, _, info = env.step(torch.zeros(3, 5, 2))
+        buf.add(state=before["state"], ep_step=(info["steps"] - 1).int())
+        expect = before["history"]
+        row = torch.full((3,), (buf.next_row - 1) % buf.rows)
+        got = frames(buf.window("state", row, torch.arange(3), 4))
+        torch.testing.assert_close(got, expect, rtol=0, atol=0)
+        # the next-state window ends with the (pre-reset) next state
+        nxt = frames(buf.window("state", row, torch.arange(3), 4, last=info["final_state"]))
+        torch.testing.assert_close(nxt, info["final_history"], rtol=0, atol=0)
+        checked += 1
+    assert checked == 30 and buf.filled == buf.rows
+    row, env_i = buf.sample_index(64, gen, past=3, future=2)
+    ok = buf.same_episode_ahead(row, env_i, 2)
+    assert ok.any() and (~ok).any()
+
+
+def test_buffer_bytes_per_transition_and_state_roundtrip():
+    learner = CBCTP(build_train_config("cbc-tp", "paper", FAST), pes.EnvConfig(), "cpu")
+    per = learner.buffer.bytes_per_transition
+    assert per < 600  # one global state (and next state), not N observations
+    assert per * 1_000_000 < 1e9
+    buf = ReplayBuffer(40, 4, {"x": ((2,), torch.float32)})
+    for i in range(13):
+        buf.add(x=torch.full((4, 2), float(i)), ep_step=torch.full((4,), i, dtype=torch.int32))
+    clone = ReplayBuffer(40, 4, {"x": ((2,), torch.float32)})
+    clone.load_state_dict(buf.state_dict())
+    assert clone.next_row == buf.next_row and torch.equal(clone.data["x"], buf.data["x"])
+
+
+@pytest.mark.parametrize("n", [1, 3, 5, 8])
+def test_one_network_serves_any_swarm_size(n):
+    torch.manual_seed(0)
+    actor, critic, tp = CBCActor(16, 16, 6), CBCCritic(16, 16, 6), TPNet(16, 2, 3)
+    env = pes.make_env(pes.EnvConfig(num_pursuers=n, capture_count=min(3, n)), 2, seed=1)
+    obs, info = env.reset()
+    pred = tp(info["history"])
+    assert pred.shape == (2, 3, 2)
+    a = actor(obs.flatten(0, 1), info["obs_mask"].flatten(0, 1), torch.zeros(2 * n, 6))
+    assert a.shape == (2 * n, 2) and a.abs().max() <= 1
+    q = critic(info["state"], info["obs_mask"][:, :, 0], a.view(2, n, 2), pred)
+    assert q.shape == (2, n) and torch.isfinite(q).all()
+
+
+def test_tp_net_ignores_pursuer_order():
+    torch.manual_seed(0)
+    tp = TPNet(16, 2, 3)
+    hist = torch.randn(4, 10, 6, 4)
+    perm = hist[:, :, [3, 0, 4, 1, 2, 5]]
+    torch.testing.assert_close(tp(hist), tp(perm))
+
+
+def test_checkpoint_errors(tmp_path):
+    cfg = pes.EnvConfig()
+    missing = tmp_path / "none.pt"
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        load_pursuer_policy(missing, cfg)
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"\x80\x03garbage" * 10)
+    with pytest.raises(CheckpointError, match="corrupted"):
+        load_pursuer_policy(bad, cfg)
+    other = tmp_path / "other.pt"
+    save_atomic({"weights": torch.zeros(3)}, other)
+    with pytest.raises(CheckpointError, match="not a PES"):
+        load_pursuer_policy(other, cfg)
+
+
+def _tiny(out, **values):
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, **values))
+    return train(cfg, out, progress=False)
+
+
+def test_train_writes_a_run_and_the_policy_evaluates(tmp_path, capsys):
+    summary = _tiny(tmp_path / "run", episodes=16, eval_episodes=4)
+    for name in ("config.yaml", "progress.csv", "checkpoint.pt", "policy.pt", "summary.json"):
+        assert (tmp_path / "run" / name).is_file(), name
+    assert summary["eval"]["episodes"] == 4
+    header = (tmp_path / "run" / "progress.csv").read_text().splitlines()[0]
+    assert "success_rate" in header and "tp_fde" in header and "updates_per_s" in header
+    # pes eval takes the run folder, the policy file or the checkpoint
+    for spec in ("run", "run/policy.pt", "run/checkpoint.pt"):
+        argv = [
+            "eval",
+            "--policy",
+            str(tmp_path / spec),
+            "--episodes",
+            "2",
+            "--json",
+            "--set",
+            "max_steps=20",
+        ]
+        assert main(argv) == 0
+        assert json.loads(capsys.readouterr().out)["episodes"] == 2
+    # starting again into the same folder without --resume is refused
+    with pytest.raises(ConfigError, match="--resume"):
+        _tiny(tmp_path / "run", episodes=16)
+
+
+def test_mismatched_checkpoint_is_refused(tmp_path, capsys):
+    _tiny(tmp_path / "run", episodes=8, eval_episodes=0)
+    with pytest.raises(CheckpointError, match="different settings"):
+        cfg = build_train_config("cbc-tp", "tiny", dict(FAST, hidden=48, episodes=16))
+        train(cfg, tmp_path / "run", resume=True, progress=False)
+    # per-pursuer networks cannot serve another swarm size
+    _tiny(tmp_path / "per", episodes=8, eval_episodes=0, shared=False)
+    with pytest.raises(CheckpointError, match="per pursuer"):
+        load_pursuer_policy(tmp_path / "per", pes.EnvConfig(num_pursuers=4))
+    # through the command line: one line, exit 2
+    (tmp_path / "broken.pt").write_bytes(b"not a checkpoint")
+    assert main(["eval", "--policy", str(tmp_path / "broken.pt"), "--episodes", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "corrupted" in err[0]
+
+
+def test_resume_after_sigkill(tmp_path):
+    """Kill a real training process with SIGKILL after a checkpoint, resume it, finish it."""
+    out = tmp_path / "run"
+    argv = [
+        sys.executable,
+        "-m",
+        "pes.cli",
+        "train",
+        "--algo",
+        "cbc-tp",
+        "--preset",
+        "tiny",
+        "--set",
+        "compile_env=false",
+        "--set",
+        "tensorboard=false",
+        "--set",
+        "episodes=64",
+        "--set",
+        "checkpoint_every=0.01",
+        "--set",
+        "eval_episodes=0",
+        "--out",
+        str(out),
+        "--json",
+    ]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    ckpt = out / "checkpoint.pt"
+    deadline = time.time() + 240
+    while time.time() < deadline and proc.poll() is None:
+        if ckpt.is_file():
+            obj = torch.load(ckpt, weights_only=True)
+            if obj["progress"]["episodes"] > 0:
+                break
+        time.sleep(0.3)
+    assert proc.poll() is None, "training ended before it could be killed"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = torch.load(ckpt, weights_only=True)["progress"]
+    assert 0 < before["episodes"] < 64
+    done = subprocess.run([*argv, "--resume"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    summary = json.loads(done.stdout)
+    assert summary["episodes"] >= 64 and summary["updates"] > before["updates"]
+    after = torch.load(ckpt, weights_only=True)["progress"]
+    assert after["env_steps"] > before["env_steps"]
+    rows = (out / "progress.csv").read_text().splitlines()
+    assert rows[0].startswith("episodes") and sum(r.startswith("episodes") for r in rows) == 1
+
+
+def test_cbc_tp_learns_on_a_tiny_budget(tmp_path):
+    """Fixed seed, ~30 s: the trained swarm clearly beats the same network untrained."""
+    torch.set_num_threads(1)
+    env = dict(
+        max_steps=100,
+        num_pursuers=3,
+        capture_count=2,
+        evader_policy="random",
+        dynamics="point_mass",
+        layout="empty",
+    )
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, episodes=80, env=env, eval_episodes=0))
+    train(cfg, tmp_path / "run", progress=False)
+    eval_cfg = cfg.env_config().replace(crash_mode="disable")
+    trained, _ = load_pursuer_policy(tmp_path / "run", eval_cfg)
+    torch.manual_seed(0)
+    untrained, _ = CBCTP.build_policy(cfg, eval_cfg, "cpu")
+    good = evaluate(trained, eval_cfg, episodes=40, num_envs=40, seed=123)
+    base = evaluate(untrained, eval_cfg, episodes=40, num_envs=40, seed=123)
+    assert good.mean_reward > base.mean_reward + 0.1, (good.summary(), base.summary())
+    assert good.mean_steps > base.mean_steps  # it stops crashing out of the game
+
+
+def test_ddpg_evader_trains_and_plays_inside_the_env(tmp_path, capsys):
+    cfg = build_train_config("evader-ddpg", "tiny", dict(FAST, episodes=16, eval_episodes=4))
+    summary = train(cfg, tmp_path / "ev", progress=False)
+    assert summary["eval"]["opponent"] == "pid-pf"
+    model = str(tmp_path / "ev" / "policy.pt")
+    for compile_step in (False, True):
+        env_cfg = pes.EnvConfig(evader_policy="ddpg", evader_model=model, max_steps=30)
+        env = pes.make_env(env_cfg, num_envs=2, seed=0, compile=compile_step)
+        env.reset()
+        for _ in range(3):
+            *_, info = env.step(torch.zeros(2, 5, 2))
+        assert info["velocities"][:, -1].norm(dim=-1).max() > 0  # the network moves it
+    argv = [
+        "eval",
+        "--policy",
+        "pid-pf",
+        "--episodes",
+        "2",
+        "--json",
+        "--set",
+        "evader_policy=ddpg",
+        "--set",
+        f"evader_model={model}",
+        "--set",
+        "max_steps=20",
+    ]
+    assert main(argv) == 0
+    assert json.loads(capsys.readouterr().out)["evader"] == "ddpg"
+    # a pursuer checkpoint is not an evader
+    _tiny(tmp_path / "pursuers", episodes=8, eval_episodes=0)
+    with pytest.raises(CheckpointError, match="not a DDPG evader"):
+        pes.make_env(
+            pes.EnvConfig(
+                evader_policy="ddpg", evader_model=str(tmp_path / "pursuers" / "policy.pt")
+            )
+        )
