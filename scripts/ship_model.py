@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import shutil
 import sys
 from pathlib import Path
@@ -37,7 +38,9 @@ PAPER_TABLE_VI = {0: (98.8, 132), 1: (95.6, 212), 2: (86.7, 308)}
 
 
 def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:
-    result = evaluate(policy, cfg, episodes=episodes, num_envs=100, seed=seed, progress=True)
+    result = evaluate(
+        policy, cfg, episodes=episodes, num_envs=100, seed=seed, progress=True, compile=True
+    )
     return result.summary()
 
 
@@ -86,7 +89,7 @@ def main() -> None:
         "train_meta": meta,
         "machine": machine,
         "evaluations": evals,
-        "eval_command": "python scripts/ship_model.py " + " ".join(sys.argv[1:]),
+        "eval_command": shlex.join(["python", "scripts/ship_model.py", *sys.argv[1:]]),
     }
     out = ROOT / "results" / f"shipped_{args.name.replace('-', '_')}.json"
     out.parent.mkdir(exist_ok=True)
