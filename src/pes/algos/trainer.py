@@ -45,6 +45,7 @@ from pes.algos.io import (
 from pes.config import save_yaml, to_dict
 from pes.errors import CheckpointError, ConfigError
 from pes.evaluate import evaluate
+from pes.sim.config import EnvConfig
 from pes.sim.env import make_env
 
 LOG_COLUMNS = (
@@ -70,6 +71,18 @@ LOG_COLUMNS = (
 divided by its steps, averaged over the row's episodes (SPEC §4)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
+REWARD_KEYS = (
+    "cooperation_weight",
+    "self_weight",
+    "safe_distance",
+    "softplus_k",
+    "crash_reward",
+    "capture_reward",
+    "evader_capture_reward",
+    "evader_crash_reward",
+)
+"""Scenario keys that only shape the reward: evaluations reset them to the paper's values."""
+
 RESUMABLE_CHANGES = {
     "episodes",
     "time_limit",
@@ -370,7 +383,10 @@ def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: b
     from pes.algos.policy import load_pursuer_policy  # noqa: PLC0415
     from pes.policies import SCRIPTED  # noqa: PLC0415
 
-    env_cfg = cfg.env_config().replace(disturbance=True, crash_mode="disable")
+    # The paper's protocol, with the paper's reward (a preset may shape the training reward).
+    defaults = EnvConfig()
+    paper_reward = {k: getattr(defaults, k) for k in REWARD_KEYS}
+    env_cfg = cfg.env_config().replace(disturbance=True, crash_mode="disable", **paper_reward)
     if cfg.algo in PURSUER_ALGOS:
         policy, _ = load_pursuer_policy(policy_path, env_cfg, cfg.device)
         opponent = env_cfg.evader_policy
