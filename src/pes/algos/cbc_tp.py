@@ -7,8 +7,9 @@ One update (Algorithm 1, lines 11-21), from the shared replay storage:
 2. critic: y_i = r_i + gamma * (1 - terminated) * Q'_i(s', a', p'), a' from the target actor on
    s' and the predicted path p' of s' (eqs. 5-6), masked mean over the pursuers alive in s;
 3. actor: maximise Q_i(s, a_1..pi(o_i, p)..a_N, p) (eq. 4) for one random alive pursuer i of
-   each sample, the others' actions from the buffer, plus a small penalty on the squared
-   action;
+   each sample, the others' actions from the buffer (``actor_gradient="one"``), or the mean
+   Q_i with every alive pursuer acting (``"all"``), plus a small penalty on the squared
+   pre-tanh action;
 4. soft target updates with rate tau.
 
 Gradients flow through the LSTMs by backpropagation through time (across the agents for the
@@ -44,33 +45,43 @@ class PursuerActors(nn.Module):
         count = 1 if cfg.shared else num_pursuers
         pred_dim = 2 * cfg.horizon if cfg.use_tp else 0
         self.nets = nn.ModuleList(
-            CBCActor(cfg.hidden, cfg.mlp_hidden, pred_dim) for _ in range(count)
+            CBCActor(cfg.hidden, cfg.mlp_hidden, pred_dim, cfg.obstacle_scale, cfg.target_scale)
+            for _ in range(count)
         )
 
-    def forward(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
-        """obs (B, N, N, 8), mask (B, N, N), pred (B, N, 2k) or None -> actions (B, N, 2)."""
+    def pre_activation(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, N, 8), mask (B, N, N), pred (B, N, 2k) or None -> (B, N, 2) before the
+        tanh."""
         b, n = obs.shape[:2]
         if len(self.nets) == 1:
             p = pred.flatten(0, 1) if pred is not None else None
-            return self.nets[0](obs.flatten(0, 1), mask.flatten(0, 1), p).view(b, n, 2)
+            out = self.nets[0].pre_activation(obs.flatten(0, 1), mask.flatten(0, 1), p)
+            return out.view(b, n, 2)
         return torch.stack(
             [
-                net(obs[:, i], mask[:, i], pred[:, i] if pred is not None else None)
+                net.pre_activation(obs[:, i], mask[:, i], pred[:, i] if pred is not None else None)
                 for i, net in enumerate(self.nets)
             ],
             dim=1,
         )
 
-    def act_one(self, obs: Tensor, mask: Tensor, pred: Tensor | None, agent: Tensor) -> Tensor:
-        """One pursuer per sample: obs (B, N, 8), mask (B, N), pred (B, 2k), agent (B,) long
-        -> (B, 2)."""
+    def forward(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, N, 8), mask (B, N, N), pred (B, N, 2k) or None -> actions (B, N, 2)."""
+        return torch.tanh(self.pre_activation(obs, mask, pred))
+
+    def pre_activation_one(
+        self, obs: Tensor, mask: Tensor, pred: Tensor | None, agent: Tensor
+    ) -> Tensor:
+        """One pursuer per sample, before the tanh: obs (B, N, 8), mask (B, N), pred (B, 2k),
+        agent (B,) long -> (B, 2)."""
         if len(self.nets) == 1:
-            return self.nets[0](obs, mask, pred)
+            return self.nets[0].pre_activation(obs, mask, pred)
         out = obs.new_zeros(obs.shape[0], 2)
         for i, net in enumerate(self.nets):
             rows = agent == i
             if bool(rows.any()):
-                out[rows] = net(obs[rows], mask[rows], pred[rows] if pred is not None else None)
+                p = pred[rows] if pred is not None else None
+                out[rows] = net.pre_activation(obs[rows], mask[rows], p)
         return out
 
 
@@ -83,7 +94,8 @@ class PursuerCritics(nn.Module):
         count = 1 if cfg.shared else num_pursuers
         pred_dim = 2 * cfg.horizon if cfg.use_tp else 0
         self.nets = nn.ModuleList(
-            CBCCritic(cfg.hidden, cfg.mlp_hidden, pred_dim) for _ in range(count)
+            CBCCritic(cfg.hidden, cfg.mlp_hidden, pred_dim, cfg.obstacle_scale, cfg.target_scale)
+            for _ in range(count)
         )
 
     def forward(self, state: Tensor, alive: Tensor, actions: Tensor, pred: Tensor | None):
@@ -232,12 +244,13 @@ class CBCTP:
         )
 
     def update(self, gen: torch.Generator) -> dict[str, float]:
-        """One gradient update of TP Net, then (after the warm-up) the critic and the actor;
-        returns their metrics."""
+        """One gradient update of TP Net (every ``tp_update_every`` calls), then (after the
+        warm-up) the critic and the actor; returns their metrics."""
         cfg, buf, n = self.cfg, self.buffer, self.n
         stats: dict[str, float] = {}
-        if self.tp is not None:
+        if self.tp is not None and self.updates % cfg.tp_update_every == 0:
             stats.update(self.update_tp(gen))
+        self.updates += 1
         if len(buf) < cfg.warmup:
             return stats
 
@@ -246,13 +259,10 @@ class CBCTP:
         next_state, next_alive = buf.get("next_state", row, env), buf.get("next_alive", row, env)
         action, reward = buf.get("action", row, env), buf.get("reward", row, env)
         terminated = buf.get("terminated", row, env)
+        pred = next_pred = None
+        if self.tp is not None:
+            pred, next_pred = buf.get("pred", row, env), buf.get("next_pred", row, env)
         with torch.no_grad():
-            pred = next_pred = None
-            if self.tp is not None:
-                hist = frames(buf.window("state", row, env, self.history))
-                next_hist = frames(buf.window("state", row, env, self.history, last=next_state))
-                both = self.tp(torch.cat([hist, next_hist]))
-                pred, next_pred = both.split(len(row))
             next_obs, next_mask = pursuer_obs(next_state, next_alive)
             rel = None if next_pred is None else relative_prediction(next_pred, next_state, n)
             next_action = self.actor_target(next_obs, next_mask, rel)
@@ -265,23 +275,34 @@ class CBCTP:
             self.opt_critic, critic_loss, self.critic.parameters(), cfg.grad_clip
         )
 
-        # Actor (eq. 4): in each sample one alive pursuer acts with the current actor, the
-        # others keep their stored actions (as MADDPG's per-agent gradient).
+        # Actor (eq. 4). "one": in each sample one alive pursuer acts with the current actor and
+        # the others keep their stored actions (MADDPG's per-agent gradient); "all": every alive
+        # pursuer acts with it at once and the actor ascends the mean of their Qs (a centralised
+        # policy gradient, as FACMAC's), N times the gradient samples for one critic pass.
         obs, mask = pursuer_obs(state, alive)
-        pick = torch.multinomial(alive.float() + 1e-6, 1, generator=gen).squeeze(1)
-        b = torch.arange(len(row), device=state.device)
-        rel = None if pred is None else relative_prediction(pred, state, n)[b, pick]
-        own = self.actor.act_one(obs[b, pick], mask[b, pick], rel, pick)
-        chosen = torch.nn.functional.one_hot(pick, n).bool().unsqueeze(-1)
-        new_action = torch.where(chosen, own.unsqueeze(1), action)
+        rel = None if pred is None else relative_prediction(pred, state, n)
+        if cfg.actor_gradient == "all":
+            pre = self.actor.pre_activation(obs, mask, rel)  # (B, N, 2)
+            new_action = torch.where(alive.unsqueeze(-1), torch.tanh(pre), action)
+            acting = alive
+        else:
+            pick = torch.multinomial(alive.float() + 1e-6, 1, generator=gen).squeeze(1)
+            b = torch.arange(len(row), device=state.device)
+            rel = None if rel is None else rel[b, pick]
+            pre = self.actor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
+            chosen = torch.nn.functional.one_hot(pick, n).bool() & alive
+            new_action = torch.where(chosen.unsqueeze(-1), torch.tanh(pre).unsqueeze(1), action)
+            pre = pre.unsqueeze(1) * chosen.unsqueeze(-1)
+            acting = chosen
         for p in self.critic.parameters():
             p.requires_grad_(False)
-        q_pi = self.critic(state, alive, new_action, pred)[b, pick]
+        q_pi = self.critic(state, alive, new_action, pred)
         for p in self.critic.parameters():
             p.requires_grad_(True)
-        picked_alive = alive[b, pick]
-        reg = masked_mean((own**2).sum(-1), picked_alive)
-        actor_loss = -masked_mean(q_pi, picked_alive) + cfg.action_reg * reg
+        # MADDPG's regulariser: the squared pre-activation, so that the tanh never saturates
+        # (a penalty on the action itself vanishes there).
+        reg = masked_mean((pre**2).sum(-1), acting)
+        actor_loss = -masked_mean(q_pi, acting) + cfg.action_reg * reg
         optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
 
         soft_update(self.actor_target, self.actor, cfg.tau)

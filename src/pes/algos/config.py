@@ -61,6 +61,12 @@ class TrainConfig:
     """Use TP Net (False gives CBC Net, the ablation of §V-C)."""
     shared: bool = True
     """One actor and one critic for all pursuers (False: one per pursuer, as Algorithm 1)."""
+    obstacle_scale: float = 20.0
+    """Factor on the obstacle-vector columns of the observation rows before the actor and the
+    critic: in arena units the 2 m safety margin is only 0.02 (see ``nets.row_scale``)."""
+    target_scale: float = 5.0
+    """Factor on the vector to the evader and on TP Net's relative prediction before the actor
+    and the critic."""
 
     # --- learning (§V-A) -----------------------------------------------------------------------
     gamma: float = 0.95
@@ -77,12 +83,19 @@ class TrainConfig:
     """Minibatch of the TP Net updates (J)."""
     update_every: int = 50
     """Collected transitions per gradient update (the paper updates every 50)."""
+    tp_update_every: int = 1
+    """Critic/actor updates per TP Net update (TP Net converges long before the others)."""
     warmup: int = 5000
     """Transitions collected before the first update."""
+    actor_gradient: str = "one"
+    """Actor update of CBC-TP: ``one`` (one random alive pursuer per sample takes the current
+    actor's action, the others keep their stored ones, as MADDPG) or ``all`` (every alive
+    pursuer takes it at once; the actor ascends the mean of their Qs)."""
     grad_clip: float = 1.0
     """Gradient norm clip (0 = none)."""
     action_reg: float = 1e-3
-    """Weight of the actions' squared magnitude in the actor loss."""
+    """Weight of the squared action in the actor loss (CBC-TP: the squared pre-tanh output, as
+    MADDPG regularises it, so that the tanh does not saturate)."""
 
     # --- exploration -----------------------------------------------------------------------------
     noise_theta: float = 0.15
@@ -126,6 +139,7 @@ class TrainConfig:
             "batch_size",
             "tp_batch_size",
             "update_every",
+            "tp_update_every",
             "log_every",
         )
         for name in positive:
@@ -136,6 +150,8 @@ class TrainConfig:
             "warmup",
             "grad_clip",
             "action_reg",
+            "obstacle_scale",
+            "target_scale",
             "noise_sigma",
             "noise_sigma_final",
             "checkpoint_every",
@@ -154,6 +170,8 @@ class TrainConfig:
             raise ConfigError("buffer_size must hold at least two steps of every environment")
         if self.device not in ("cpu", "cuda"):
             raise ConfigError(f"device must be cpu or cuda, got '{self.device}'")
+        if self.actor_gradient not in ("one", "all"):
+            raise ConfigError(f"actor_gradient must be one or all, got '{self.actor_gradient}'")
         if self.opponent not in ("pid-pf", "random"):
             raise ConfigError(f"opponent must be pid-pf or random, got '{self.opponent}'")
         self.env_config()  # checks the scenario keys
@@ -202,12 +220,15 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
             batch_size=256,
             tp_batch_size=256,
             update_every=32,
+            tp_update_every=4,
             warmup=10_000,
             noise_sigma=0.2,
             noise_sigma_final=0.05,
             noise_decay=0.6,
             time_limit=60.0,
-            env=dict(evader_policy="ddpg"),
+            # The distance terms of eqs. (8)-(9) ten times heavier in training (evaluations use
+            # the paper's weights): see docs/algorithms/cbc_tp.md, "Training reward".
+            env=dict(evader_policy="ddpg", self_weight=5.0, cooperation_weight=1.0),
         ),
         "tiny": dict(
             episodes=40,

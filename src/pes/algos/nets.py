@@ -63,53 +63,92 @@ class TPNet(nn.Module):
         return frames[:, -1, -1, :2].unsqueeze(1) + disp
 
 
+def row_scale(obstacle_scale: float, target_scale: float) -> Tensor:
+    """(8,) factors applied to the columns of a Table I row before a network sees it.
+
+    The rows are in arena units (metres / arena size), where the 2 m safety margin of eq. (9) is
+    0.02 and the 2 m capture radius too: the networks would need weights of ~100 to resolve
+    them. The obstacle vector (columns 4-5) is multiplied by ``obstacle_scale`` and the vector
+    to the evader (columns 6-7) by ``target_scale``; positions and velocities are kept."""
+    return torch.tensor([1.0, 1.0, 1.0, 1.0] + [obstacle_scale] * 2 + [target_scale] * 2)
+
+
 class CBCActor(nn.Module):
     """The CBC actor (Fig. 4a): a bidirectional LSTM across the agents of one pursuer's
     observation, with the pursuer itself at the first and the last cell, joined with the
     predicted evader path (relative to the pursuer) and an MLP to the desired acceleration.
 
-    Each cell's input is the observation row (8) and a 1/0 flag saying whether the row is real;
-    masked rows are zero, so any number of alive pursuers goes through the same network.
+    Each cell's input is the observation row (8, scaled by :func:`row_scale`) and a 1/0 flag
+    saying whether the row is real; masked rows are zero, so any number of alive pursuers goes
+    through the same network. The last layer starts near zero (as DDPG's), so that the untrained
+    swarm hovers instead of flying into the nearest wall.
     """
 
-    def __init__(self, hidden: int = 256, mlp_hidden: int = 64, pred_dim: int = 6) -> None:
+    def __init__(
+        self,
+        hidden: int = 256,
+        mlp_hidden: int = 64,
+        pred_dim: int = 6,
+        obstacle_scale: float = 1.0,
+        target_scale: float = 1.0,
+    ) -> None:
         super().__init__()
         self.hidden = hidden
         self.pred_dim = pred_dim
+        self.target_scale = target_scale
+        self.register_buffer("scale", row_scale(obstacle_scale, target_scale))
         self.lstm = nn.LSTM(9, hidden, batch_first=True, bidirectional=True)
-        self.head = mlp([2 * hidden + pred_dim, mlp_hidden, 2], nn.Tanh())
+        self.head = mlp([2 * hidden + pred_dim, mlp_hidden, 2])
+        nn.init.uniform_(self.head[-1].weight, -3e-3, 3e-3)
+        nn.init.uniform_(self.head[-1].bias, -3e-3, 3e-3)
 
-    def forward(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
-        """obs (B, N, 8), mask (B, N), pred (B, pred_dim) or None -> actions (B, 2) in [-1, 1]."""
-        cells = torch.cat([obs, mask.unsqueeze(-1).to(obs.dtype)], dim=-1)
+    def pre_activation(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, 8), mask (B, N), pred (B, pred_dim) or None -> (B, 2) before the tanh."""
+        cells = torch.cat([obs * self.scale, mask.unsqueeze(-1).to(obs.dtype)], dim=-1)
         seq = torch.cat([cells, cells[:, :1]], dim=1)  # self first and last
         out, _ = self.lstm(seq)
         h = self.hidden
         feat = torch.cat([out[:, -1, :h], out[:, 0, h:]], dim=-1)
         if self.pred_dim:
-            feat = torch.cat([feat, pred], dim=-1)
+            feat = torch.cat([feat, pred * self.target_scale], dim=-1)
         return self.head(feat)
+
+    def forward(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, 8), mask (B, N), pred (B, pred_dim) or None -> actions (B, 2) in [-1, 1]."""
+        return torch.tanh(self.pre_activation(obs, mask, pred))
 
 
 class CBCCritic(nn.Module):
     """The centralised critic (Fig. 4b): a bidirectional LSTM across all pursuers, each cell
     holding that pursuer's global-state row (8), the evader's [position, velocity, obstacle
     vector] (6), its action (2), the predicted evader path relative to it (2k) and an alive
-    flag; an MLP (64) on each cell's output gives that pursuer's Q."""
+    flag; an MLP (64) on each cell's output gives that pursuer's Q. Rows are scaled as the
+    actor's (:func:`row_scale`)."""
 
-    def __init__(self, hidden: int = 256, mlp_hidden: int = 64, pred_dim: int = 6) -> None:
+    def __init__(
+        self,
+        hidden: int = 256,
+        mlp_hidden: int = 64,
+        pred_dim: int = 6,
+        obstacle_scale: float = 1.0,
+        target_scale: float = 1.0,
+    ) -> None:
         super().__init__()
         self.pred_dim = pred_dim
+        self.target_scale = target_scale
+        self.register_buffer("scale", row_scale(obstacle_scale, target_scale))
         self.lstm = nn.LSTM(8 + 6 + 2 + pred_dim + 1, hidden, batch_first=True, bidirectional=True)
         self.head = mlp([2 * hidden, mlp_hidden, 1])
 
     def forward(self, state: Tensor, alive: Tensor, actions: Tensor, pred: Tensor | None) -> Tensor:
         """state (B, A, 8), alive (B, N), actions (B, N, 2), pred (B, k, 2) -> Q (B, N)."""
         n = alive.shape[-1]
+        state = state * self.scale
         evader = state[:, -1:, :6].expand(-1, n, -1)
         parts = [state[:, :n], evader, actions * alive.unsqueeze(-1)]
         if self.pred_dim:
-            parts.append(relative_prediction(pred, state, n) * alive.unsqueeze(-1))
+            rel = relative_prediction(pred, state, n) * self.target_scale
+            parts.append(rel * alive.unsqueeze(-1))
         parts.append(alive.unsqueeze(-1).to(state.dtype))
         out, _ = self.lstm(torch.cat(parts, dim=-1))
         return self.head(out).squeeze(-1)

@@ -199,6 +199,7 @@ def train(
         torch.set_rng_state(ckpt["rng"]["torch"])
         gen.set_state(ckpt["rng"]["sampler"])
         prog = Progress(**ckpt["progress"])
+        learner.updates = prog.updates
     save_yaml(cfg, out / "config.yaml")
 
     def checkpoint() -> None:
@@ -256,7 +257,7 @@ def train(
     logger = RunLogger(out, cfg.tensorboard, resume)
     window: dict[str, list] = {"success": [], "steps": [], "reward": [], "crashes": []}
     stats_sum: dict[str, float] = {}
-    stats_count = 0
+    stats_count: dict[str, int] = {}
     reward_sum = torch.zeros(cfg.num_envs, device=device)
     start = time.perf_counter()
     wall0 = prog.wall_s
@@ -301,7 +302,7 @@ def train(
                 while prog.update_credit >= 1.0:
                     for k, v in learner.update(gen).items():
                         stats_sum[k] = stats_sum.get(k, 0.0) + v
-                    stats_count += 1
+                        stats_count[k] = stats_count.get(k, 0) + 1
                     prog.updates += 1
                     prog.update_credit -= 1.0
 
@@ -322,7 +323,7 @@ def train(
                     "env_steps_per_s": (prog.env_steps - row_start[1]) / dt,
                     "updates_per_s": (prog.updates - row_start[2]) / dt,
                 }
-                row.update({k: v / stats_count for k, v in stats_sum.items() if stats_count})
+                row.update({k: v / stats_count[k] for k, v in stats_sum.items()})
                 logger.write(row)
                 score = learner.score(row["success_rate"], row["episode_steps"])
                 if score > prog.best_score:
@@ -334,7 +335,7 @@ def train(
                     reward=f"{row['avg_reward']:.3f}",
                 )
                 window = {k: [] for k in window}
-                stats_sum, stats_count = {}, 0
+                stats_sum, stats_count = {}, {}
                 row_start = (now, prog.env_steps, prog.updates)
                 next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
             if cfg.checkpoint_every > 0 and now - last_ckpt >= cfg.checkpoint_every * 60.0:
