@@ -11,7 +11,8 @@ For each algorithm and preset it measures, after a warm-up that fills the replay
   the rest is the critic, the actor and the soft target updates);
 * ``train_env_steps_per_s``: what a run achieves with the preset's ``update_every``
   (one update per that many transitions): 1 / (1 / collect + update_s / update_every);
-* ``bytes_per_transition`` of the replay buffer and what 1e6 transitions take.
+* ``bytes_per_transition`` of the replay buffer and what 1e6 transitions take;
+* ``update_time_by_op``: the share of an update's time taken by its five costliest operators.
 """
 
 from __future__ import annotations
@@ -48,7 +49,9 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
             obs, info = obs2, info2
 
     need = max(cfg.warmup, cfg.batch_size, cfg.tp_batch_size) // cfg.num_envs + 20
-    collect(need)  # compiles the step and fills the buffer past the warm-up
+    # Fill the buffer past the warm-up and play past the first episode end, so that the step
+    # and the auto-reset pass are both compiled before the timed window.
+    collect(max(need, env_cfg.max_steps + 5))
     sync()
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
@@ -70,6 +73,7 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
         updates += 1
     sync()
     total = time.perf_counter() - start
+    profile = profile_update(learner, gen, device)
     # update() includes one TP step: subtract the extra one timed separately
     update_s = (total - tp_time) / updates
     tp_s = tp_time / updates
@@ -92,7 +96,24 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
         "update_share_of_time": round(1 - train_rate / collect_rate, 3),
         "bytes_per_transition": per,
         "buffer_gb_at_1e6": round(per * 1e6 / 1e9, 3),
+        "update_time_by_op": profile,
     }
+
+
+def profile_update(learner, gen: torch.Generator, device: str, updates: int = 10) -> dict:
+    """Where an update's time goes: the share of the self time of the five costliest operator
+    kinds over ``updates`` updates (torch.profiler), summed forward and backward."""
+    from torch.profiler import ProfilerActivity, profile
+
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device == "cuda" else [])
+    with profile(activities=activities) as prof:
+        for _ in range(updates):
+            learner.update(gen)
+    key = "self_device_time_total" if device == "cuda" else "self_cpu_time_total"
+    events = [e for e in prof.key_averages() if getattr(e, key, 0) > 0]
+    total = sum(getattr(e, key) for e in events)
+    top = sorted(events, key=lambda e: getattr(e, key), reverse=True)[:5]
+    return {e.key: round(getattr(e, key) / total, 3) for e in top}
 
 
 def main() -> None:

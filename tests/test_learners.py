@@ -148,6 +148,13 @@ def test_train_writes_a_run_and_the_policy_evaluates(tmp_path, capsys):
         _tiny(tmp_path / "run", episodes=16)
 
 
+def test_all_pursuer_actor_gradient_trains(tmp_path):
+    summary = _tiny(tmp_path / "all", episodes=8, eval_episodes=0, actor_gradient="all")
+    assert summary["updates"] > 0 and (tmp_path / "all" / "policy.pt").is_file()
+    with pytest.raises(ConfigError, match="actor_gradient"):
+        build_train_config("cbc-tp", "tiny", {"actor_gradient": "some"})
+
+
 def test_mismatched_checkpoint_is_refused(tmp_path, capsys):
     _tiny(tmp_path / "run", episodes=8, eval_episodes=0)
     with pytest.raises(CheckpointError, match="different settings"):
