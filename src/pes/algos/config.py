@@ -63,7 +63,7 @@ class TrainConfig:
     """One actor and one critic for all pursuers (False: one per pursuer, as Algorithm 1)."""
     obstacle_scale: float = 20.0
     """Factor on the obstacle-vector columns of the observation rows before the actor and the
-    critic: in arena units the 2 m safety margin is only 0.02 (see ``nets.row_scale``)."""
+    critic: in arena units the 2 m safety margin is only 0.02 (see ``nets.RowScaled``)."""
     target_scale: float = 5.0
     """Factor on the vector to the evader and on TP Net's relative prediction before the actor
     and the critic."""

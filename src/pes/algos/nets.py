@@ -63,22 +63,30 @@ class TPNet(nn.Module):
         return frames[:, -1, -1, :2].unsqueeze(1) + disp
 
 
-def row_scale(obstacle_scale: float, target_scale: float) -> Tensor:
-    """(8,) factors applied to the columns of a Table I row before a network sees it.
+class RowScaled(nn.Module):
+    """Base of the CBC actor and critic: the factors applied to the columns of a Table I row
+    before a network sees it (a buffer, so that they travel with the weights).
 
     The rows are in arena units (metres / arena size), where the 2 m safety margin of eq. (9) is
     0.02 and the 2 m capture radius too: the networks would need weights of ~100 to resolve
     them. The obstacle vector (columns 4-5) is multiplied by ``obstacle_scale`` and the vector
-    to the evader (columns 6-7) by ``target_scale``; positions and velocities are kept."""
-    return torch.tensor([1.0, 1.0, 1.0, 1.0] + [obstacle_scale] * 2 + [target_scale] * 2)
+    to the evader (columns 6-7) and the relative prediction (``pred_dim`` numbers) by
+    ``target_scale``; positions and velocities are kept."""
+
+    def __init__(self, pred_dim: int, obstacle_scale: float, target_scale: float) -> None:
+        super().__init__()
+        self.pred_dim = pred_dim
+        self.target_scale = target_scale
+        factors = [1.0, 1.0, 1.0, 1.0] + [obstacle_scale] * 2 + [target_scale] * 2
+        self.register_buffer("scale", torch.tensor(factors))
 
 
-class CBCActor(nn.Module):
+class CBCActor(RowScaled):
     """The CBC actor (Fig. 4a): a bidirectional LSTM across the agents of one pursuer's
     observation, with the pursuer itself at the first and the last cell, joined with the
     predicted evader path (relative to the pursuer) and an MLP to the desired acceleration.
 
-    Each cell's input is the observation row (8, scaled by :func:`row_scale`) and a 1/0 flag
+    Each cell's input is the observation row (8, scaled by :class:`RowScaled`) and a 1/0 flag
     saying whether the row is real; masked rows are zero, so any number of alive pursuers goes
     through the same network. The last layer starts near zero (as DDPG's), so that the untrained
     swarm hovers instead of flying into the nearest wall.
@@ -92,11 +100,8 @@ class CBCActor(nn.Module):
         obstacle_scale: float = 1.0,
         target_scale: float = 1.0,
     ) -> None:
-        super().__init__()
+        super().__init__(pred_dim, obstacle_scale, target_scale)
         self.hidden = hidden
-        self.pred_dim = pred_dim
-        self.target_scale = target_scale
-        self.register_buffer("scale", row_scale(obstacle_scale, target_scale))
         self.lstm = nn.LSTM(9, hidden, batch_first=True, bidirectional=True)
         self.head = mlp([2 * hidden + pred_dim, mlp_hidden, 2])
         nn.init.uniform_(self.head[-1].weight, -3e-3, 3e-3)
@@ -118,12 +123,12 @@ class CBCActor(nn.Module):
         return torch.tanh(self.pre_activation(obs, mask, pred))
 
 
-class CBCCritic(nn.Module):
+class CBCCritic(RowScaled):
     """The centralised critic (Fig. 4b): a bidirectional LSTM across all pursuers, each cell
     holding that pursuer's global-state row (8), the evader's [position, velocity, obstacle
     vector] (6), its action (2), the predicted evader path relative to it (2k) and an alive
     flag; an MLP (64) on each cell's output gives that pursuer's Q. Rows are scaled as the
-    actor's (:func:`row_scale`)."""
+    actor's (:class:`RowScaled`)."""
 
     def __init__(
         self,
@@ -133,10 +138,7 @@ class CBCCritic(nn.Module):
         obstacle_scale: float = 1.0,
         target_scale: float = 1.0,
     ) -> None:
-        super().__init__()
-        self.pred_dim = pred_dim
-        self.target_scale = target_scale
-        self.register_buffer("scale", row_scale(obstacle_scale, target_scale))
+        super().__init__(pred_dim, obstacle_scale, target_scale)
         self.lstm = nn.LSTM(8 + 6 + 2 + pred_dim + 1, hidden, batch_first=True, bidirectional=True)
         self.head = mlp([2 * hidden, mlp_hidden, 1])
 
