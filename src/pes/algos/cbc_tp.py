@@ -17,10 +17,11 @@ actor and critic, across the history for TP Net). The prediction fed to the acto
 TP Net's, detached: TP Net learns only from eq. (7), as Algorithm 1's hierarchy.
 
 The predictions are stored with each transition as TP Net made them while acting (for s and
-for s'), in the place of Algorithm 1's p_tar: recomputing them for every minibatch would double
-the cost of an update on a CPU, and TP Net converges within the warm-up (its loss is ~1e-5 in
-arena units after a few hundred updates), so the stored ones are current but for the first
-transitions. TP Net is trained from the warm-up on; the actor and critic after it.
+for s'), in the place of Algorithm 1's p_tar: recomputing them for every minibatch (two history
+windows through TP Net per sample) is a large share of an update on a CPU, and TP Net converges
+within the warm-up (its loss is ~1e-5 in arena units after a few hundred updates), so the
+stored ones are current but for the first transitions. TP Net is trained from the warm-up on,
+every ``tp_update_every`` updates; the actor and critic after the warm-up.
 """
 
 from __future__ import annotations
