@@ -287,6 +287,29 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
 }
 PRESETS["cbc"] = {name: dict(values, use_tp=False) for name, values in PRESETS["cbc-tp"].items()}
 
+# --- off-policy baselines (docs/algorithms/maddpg.md, ddpg.md, bicnet.md) -----------------------
+# The paper gives no settings for its baselines: they take CBC-TP's (§V-A, and its quick
+# preset's training reward), with MLPs of two hidden layers of mlp_hidden units where MADDPG
+# and DDPG have no LSTM.
+OFF_POLICY_QUICK = dict(
+    PRESETS["cbc-tp"]["quick"],
+    use_tp=False,
+    episodes=3000,
+    time_limit=0.0,
+)
+OFF_POLICY_TINY = dict(PRESETS["cbc-tp"]["tiny"], use_tp=False)
+PRESETS["maddpg"] = {
+    "paper": dict(PAPER, use_tp=False, shared=False),
+    "quick": dict(OFF_POLICY_QUICK, shared=False),
+    "tiny": dict(OFF_POLICY_TINY, shared=False),
+}
+PRESETS["ddpg"] = {name: dict(values) for name, values in PRESETS["maddpg"].items()}
+PRESETS["bicnet"] = {
+    "paper": dict(PAPER, use_tp=False, actor_gradient="all"),
+    "quick": dict(OFF_POLICY_QUICK, actor_gradient="all"),
+    "tiny": dict(OFF_POLICY_TINY, actor_gradient="all"),
+}
+
 
 def build_train_config(
     algo: str, preset: str = "quick", values: dict[str, Any] | None = None
