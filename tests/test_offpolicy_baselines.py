@@ -119,6 +119,12 @@ def test_bicnet_serves_any_swarm_size_and_maddpg_does_not(tmp_path):
             load_pursuer_policy(tmp_path / algo, pes.EnvConfig(num_pursuers=4))
 
 
+def test_unshipped_algorithm_name_is_a_clear_error(capsys):
+    assert main(["eval", "--policy", "maddpg", "--episodes", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no 'maddpg' model is shipped" in err[0]
+
+
 def test_bad_settings_are_refused():
     for values, match in (
         ({"shared": False}, "shared"),
