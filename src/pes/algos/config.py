@@ -292,7 +292,7 @@ PRESETS["cbc"] = {name: dict(values, use_tp=False) for name, values in PRESETS["
 # The paper gives no settings for its baselines: they take CBC-TP's (§V-A; quick: CBC-TP's quick
 # recipe and training reward), MADDPG's and DDPG's MLPs two hidden layers of mlp_hidden units.
 # Quick budgets are episodes sized to ~20 minutes on one unloaded core: the MLP learners update
-# twice as often (their updates are cheap), BiCNet's LSTMs cost ~3x more per update.
+# twice as often (their updates are cheap); BiCNet's LSTMs cost ~5x more per update.
 OFF_POLICY_QUICK = dict(PRESETS["cbc-tp"]["quick"], use_tp=False, time_limit=0.0)
 OFF_POLICY_TINY = dict(PRESETS["cbc-tp"]["tiny"], use_tp=False)
 PRESETS["maddpg"] = {
