@@ -311,6 +311,32 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export_onnx(args: argparse.Namespace) -> int:
+    from pes.record.onnx_export import export_onnx
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".onnx":
+        raise ConfigError(f"OUT must end in .onnx, got '{out.name}'")
+    summary = export_onnx(args.checkpoint, out, opset=args.opset, check=args.check)
+    if args.json:
+        _print_json(summary)
+    else:
+        sizes = summary["num_pursuers"]
+        print(
+            f"wrote {out} ({summary['algo']}, {summary['bytes'] / 1e6:.2f} MB, opset "
+            f"{summary['opset']}, {sizes} pursuers, dynamic batch)"
+        )
+        for kind in ("inputs", "outputs"):
+            shapes = ", ".join(f"{k} {v}" for k, v in summary[kind].items())
+            print(f"  {kind}: {shapes}")
+        if "max_abs_error" in summary:
+            print(
+                f"  onnxruntime vs PyTorch: max abs error {summary['max_abs_error']:.1e} on "
+                f"random inputs with {summary['checked_num_pursuers']} pursuers"
+            )
+    return 0
+
+
 # --- the parser ------------------------------------------------------------------------------
 
 
@@ -454,6 +480,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser(
+        "export-onnx",
+        help="a CBC-TP / CBC policy (actor + TP Net) as one ONNX graph",
+        description="Export the actor of a cbc-tp or cbc policy, with its TP Net, as one ONNX "
+        "graph with a dynamic number of pursuers and a dynamic batch (inputs obs, alive, "
+        "history; outputs actions and prediction; see docs/export.md). Then run the file with "
+        "onnxruntime on random inputs and report its largest difference from PyTorch.",
+    )
+    p.add_argument(
+        "checkpoint",
+        metavar="CHECKPOINT",
+        help="cbc-tp (the shipped swarm), or a policy.pt / checkpoint.pt / run folder",
+    )
+    p.add_argument("out", metavar="OUT.onnx", help="the ONNX file to write")
+    p.add_argument("--opset", type=_positive, default=None, help="ONNX opset (default: torch's)")
+    p.add_argument(
+        "--check",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="compare onnxruntime with PyTorch on random inputs (default: on)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_export_onnx)
     return parser
 
 
