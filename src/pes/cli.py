@@ -516,7 +516,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="cbc-tp (the shipped swarm), or a policy.pt / checkpoint.pt / run folder",
     )
     p.add_argument("out", metavar="OUT.onnx", help="the ONNX file to write")
-    p.add_argument("--opset", type=_positive, default=None, help="ONNX opset (default: torch's)")
+    p.add_argument(
+        "--opset",
+        type=_positive,
+        default=None,
+        help="ONNX opset, 18 or above (default: torch's, 20 with torch 2.13)",
+    )
     p.add_argument(
         "--check",
         action=argparse.BooleanOptionalAction,

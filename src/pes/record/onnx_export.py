@@ -175,11 +175,12 @@ def export_onnx(
     outputs = ["actions", "prediction"] if with_tp else ["actions"]
     # The exporter is chatty (progress on stdout, warnings and log lines about its internals):
     # keep stdout for the one JSON object of ``--json`` and stderr for real errors.
-    quiet = logging.getLogger("torch.onnx")
-    level = quiet.level
+    loggers = [logging.getLogger(name) for name in ("torch.onnx", "onnxscript")]
+    levels = [logger.level for logger in loggers]
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
-        quiet.setLevel(logging.ERROR)
+        for logger in loggers:
+            logger.setLevel(logging.CRITICAL)
         try:
             program = torch.onnx.export(
                 model,
@@ -193,8 +194,13 @@ def export_onnx(
         except Exception as exc:  # noqa: BLE001 - an exporter failure is not a user mistake
             raise RuntimeError(f"the ONNX exporter failed: {exc}") from exc
         finally:
-            quiet.setLevel(level)
+            for logger, level in zip(loggers, levels):
+                logger.setLevel(level)
         program.save(str(out), external_data=False)
+    written = _opset(out)
+    if opset is not None and written != opset:  # the exporter falls back without a word
+        out.unlink()
+        raise PESError(f"the ONNX exporter cannot write opset {opset} (it wrote {written})")
     summary: dict[str, Any] = {
         "path": str(out),
         "algo": cfg.algo,
@@ -203,7 +209,7 @@ def export_onnx(
         "history_length": history_length,
         "horizon": cfg.horizon if with_tp else 0,
         **graph_signature(out),
-        "opset": _opset(out),
+        "opset": written,
     }
     if check:
         sizes = sorted({3, trained_n}) if shared else [trained_n]
