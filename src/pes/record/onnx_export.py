@@ -146,8 +146,9 @@ def export_onnx(
     pursuers, a fifth dead) and the largest absolute difference from PyTorch's actions is
     reported as ``max_abs_error``. Returns a summary: ``path``, ``algo``, ``bytes``,
     ``inputs`` and ``outputs`` (name -> shape, symbolic axes as names), ``num_pursuers``
-    ("dynamic" or the fixed count of per-pursuer networks), ``history_length`` and
-    ``max_abs_error``.
+    ("dynamic" or the fixed count of per-pursuer networks), ``history_length``, ``horizon``,
+    ``opset``, and with ``check`` ``max_abs_error`` and ``checked_num_pursuers``. An ``opset``
+    the exporter cannot write is a PESError.
     """
     _require_onnx()
     model, cfg = load_exportable(spec)
@@ -156,7 +157,7 @@ def export_onnx(
     history_length = scenario.history_length
     with_tp = model.tp is not None
     shared = len(model.actor.nets) == 1
-    n_example = 4 if shared else trained_n  # 4: distinct from k, n and the feature sizes
+    n_example = 4 if shared else trained_n  # the example's N: torch.export specialises 0 and 1
     gen = torch.Generator().manual_seed(0)
     inputs = example_inputs(n_example, 2, history_length, with_tp, generator=gen)
     batch = torch.export.Dim("batch")
