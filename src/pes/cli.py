@@ -14,8 +14,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from pes import __version__
 from pes.config import load_yaml, parse_override
 from pes.errors import ConfigError, PESError
@@ -115,31 +113,10 @@ def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"
 
 def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "cpu"):
     """One recorded episode of ``policy_name``: returns the episode record."""
-    from pes.record import EpisodeRecorder
-    from pes.sim.env import make_env
+    from pes.record import record_episode
 
-    env = make_env(config, num_envs=1, device=device, seed=seed)
     policy = make_policy(policy_name, config, seed=seed, device=device)
-    obs, info = env.reset(seed=seed)
-    recorder = EpisodeRecorder(env)
-    arena = torch.tensor([config.arena_width, config.arena_height])
-
-    def act():  # the actions, and the evader positions the policy predicts (m), if any
-        actions = policy(obs, info)
-        pred = getattr(policy, "last_prediction", None)
-        return actions, None if pred is None else pred[0] * arena
-
-    with torch.no_grad():
-        actions, pred = act()
-        recorder.start(pred)
-        while not recorder.finished:
-            obs, _, terminated, truncated, info = env.step(actions)
-            if bool(terminated[0] | truncated[0]):  # obs is already the next episode's
-                recorder.add(info)
-            else:
-                actions, pred = act()
-                recorder.add(info, pred)
-    return recorder.record()
+    return record_episode(policy, config, seed=seed, device=device)
 
 
 # --- commands --------------------------------------------------------------------------------
@@ -344,6 +321,35 @@ def cmd_export_onnx(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    import shlex
+
+    from pes.experiments.reproduce import reproduce
+
+    out = args.out or f"runs/reproduce-{args.budget}"
+    _say(args, f"reproducing {args.target} ({args.budget} budget, {args.seeds} seeds) into {out}")
+    summary = reproduce(
+        args.target,
+        budget=args.budget,
+        seeds=args.seeds,
+        out=out,
+        methods=args.methods,
+        ray_address=args.ray_address,
+        use_ray=False if args.no_ray else None,
+        progress=not args.json,
+        command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
+    )
+    if args.json:
+        _print_json(summary)
+    else:
+        print(
+            f"done: {summary['ran']} trial(s) run, {summary['skipped']} already finished "
+            f"({summary['runner']}), {summary['seconds']:.0f} s; wrote in {out}: "
+            + ", ".join(f for f in summary["files"] if "/" not in f)
+        )
+    return 0
+
+
 # --- the parser ------------------------------------------------------------------------------
 
 
@@ -530,6 +536,43 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_export_onnx)
+
+    p = sub.add_parser(
+        "reproduce",
+        help="run the paper's experiments: tables IV-VI and figures 6-13",
+        description="Train and evaluate every method over several seeds and write the paper's "
+        "tables (Markdown, beside the paper's numbers), figures (PNG) and each trial's CSV log "
+        "into --out. Trials run as Ray Tune trials (one CPU each) when Ray is installed, else "
+        "one after the other; re-running skips finished trials and resumes interrupted ones "
+        "(see docs/reproduce.md).",
+    )
+    p.add_argument("target", choices=["table4", "table5", "table6", "figures", "all"])
+    p.add_argument(
+        "--budget",
+        choices=["quick", "paper", "tiny"],
+        default="quick",
+        help="training presets and evaluation size: quick (laptop CPU), paper (the paper's "
+        "settings), tiny (a one-minute check of the pipeline) (default: quick)",
+    )
+    p.add_argument("--seeds", type=_positive, default=3, help="seeds per method (default: 3)")
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        metavar="M",
+        help="only these methods (default: every one available: pid-pf and the learners)",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="A",
+        help="run the trials on this Ray cluster (its nodes must see --out); default: a local "
+        "Ray instance",
+    )
+    p.add_argument("--no-ray", action="store_true", help="run the trials here, one at a time")
+    p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_reproduce)
     return parser
 
 

@@ -3,7 +3,7 @@ export of trained policies (:mod:`pes.record.onnx_export`, needs the ``onnx`` ex
 
 from typing import Any
 
-from pes.record.episode import EpisodeRecorder, load_record, save_record
+from pes.record.episode import EpisodeRecorder, load_record, record_episode, save_record
 from pes.record.render import render_frames, save_gif, save_mp4
 
 
@@ -20,6 +20,7 @@ __all__ = [
     "EpisodeRecorder",
     "load_record",
     "plot_trajectories",
+    "record_episode",
     "render_frames",
     "save_gif",
     "save_mp4",
