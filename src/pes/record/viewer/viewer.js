@@ -1,6 +1,6 @@
 /* pes view: replays one episode record in 3-D with three.js (the global THREE).
  *
- * The scene's data is the JSON in <script id="pes-data">, prepared by scene_data() in
+ * The scene's data is the JSON of the page's "pes-data" script element, made by scene_data() in
  * src/pes/record/viewer.py (see docs/viewer.md). World axes: x east and y north in the
  * record's metres, z up (altitude, m). window.pesViewer exposes the state and a few controls
  * (setStep, play, pause, setView) for scripts and tests.
@@ -45,6 +45,8 @@
     box.hidden = false;
     console.error("pes view: " + api.error);
   }
+
+  window.addEventListener("error", (event) => fail(event.message));
 
   let data;
   try {
@@ -718,6 +720,8 @@
     render();
     return api.step;
   };
+  // the three.js objects, for poking at the scene by hand (not enumerable: api stays plain data)
+  Object.defineProperty(api, "three", { value: { renderer, scene, camera, controls, sun } });
   api.play = () => setPlaying(true);
   api.pause = () => setPlaying(false);
   api.setView = (view) => {
