@@ -412,7 +412,7 @@
 
   function trailLength() {
     const value = document.getElementById("trail").value;
-    return value === "all" ? Infinity : Number(value);
+    return value === "all" ? Infinity : Number(value) / data.dt; // seconds to steps
   }
 
   function updateTrail(v, p, head) {
@@ -680,6 +680,9 @@
     api.speed = Number(e.target.value);
   });
   document.getElementById("trail").addEventListener("change", () => setPlayhead(playhead));
+  document.getElementById("legend-toggle").addEventListener("click", () => {
+    legend.hidden = !legend.hidden;
+  });
   document.getElementById("glass").addEventListener("change", (e) => {
     setGlass(e.target.checked);
     needsRender = true;
