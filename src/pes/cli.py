@@ -238,6 +238,32 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    import webbrowser
+
+    from pes.record.viewer import write_page
+
+    page, record = write_page(args.record, args.out)
+    opened = webbrowser.open(page.resolve().as_uri()) if args.open else False
+    outcome = record["outcome"]
+    if args.json:
+        _print_json(
+            {
+                "record": args.record,
+                "page": str(page),
+                "bytes": page.stat().st_size,
+                "steps": len(record["frames"]) - 1,
+                "success": outcome["success"],
+                "opened": opened,
+            }
+        )
+    else:
+        print(f"wrote {page} ({len(record['frames']) - 1} steps); open it in a browser")
+        if args.open and not opened:
+            print("(no browser could be started here)", file=sys.stderr)
+    return 0
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from pes.algos.config import build_train_config
     from pes.algos.trainer import train
@@ -451,6 +477,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser(
+        "view",
+        help="the interactive 3-D replay of an episode record (an HTML page)",
+        description="Write a self-contained HTML page (works offline, from disk) that replays "
+        "an episode record in 3-D: buildings, vehicles, trails, predictions, capture radius, "
+        "with a timeline and an orbiting camera.",
+    )
+    p.add_argument("record", metavar="EPISODE.json", help="an episode record (pes render / demo)")
+    p.add_argument("--out", metavar="PAGE.html", help="the page (default: EPISODE.html)")
+    p.add_argument("--open", action="store_true", help="open the page in the web browser")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_view)
 
     from pes.algos import ALGOS
 

@@ -1,10 +1,12 @@
-"""Looking at episodes: JSON records, top-down GIF/MP4 animations, trajectory plots, ONNX
-export of trained policies (:mod:`pes.record.onnx_export`, needs the ``onnx`` extra)."""
+"""Looking at episodes: JSON records, top-down GIF/MP4 animations, trajectory plots, the 3-D
+browser replay (``pes view``), ONNX export of trained policies (:mod:`pes.record.onnx_export`,
+needs the ``onnx`` extra)."""
 
 from typing import Any
 
 from pes.record.episode import EpisodeRecorder, load_record, record_episode, save_record
 from pes.record.render import render_frames, save_gif, save_mp4
+from pes.record.viewer import build_page, write_page
 
 
 def __getattr__(name: str) -> Any:
@@ -18,6 +20,7 @@ def __getattr__(name: str) -> Any:
 
 __all__ = [
     "EpisodeRecorder",
+    "build_page",
     "load_record",
     "plot_trajectories",
     "record_episode",
@@ -26,4 +29,5 @@ __all__ = [
     "save_mp4",
     "save_plot",
     "save_record",
+    "write_page",
 ]
