@@ -294,7 +294,7 @@ def _trajectory_figures(out, specs, done, meta, folder, plt) -> list[tuple[str, 
             (
                 "fig13_damaged_steps.png",
                 "Fig. 13: episode steps of CBC-TP Net with 0 / 1 / 2 pursuers damaged, every "
-                "evaluation episode of every seed (failures count at the 500-step limit; triangles: "
+                "evaluation episode of every seed (failures count at the step limit; triangles: "
                 "means).",
             )
         )

@@ -93,6 +93,15 @@ def run_sequential(specs: list[dict], out: Path, view: SweepProgress) -> None:
         view.finish(spec["id"])
 
 
+_ACTIVE_VIEW: SweepProgress | None = None
+"""The progress view of the Ray sweep in flight (see :func:`run_ray`)."""
+
+
+def _on_trial(event: str, trial: str) -> None:
+    if _ACTIVE_VIEW is not None:
+        getattr(_ACTIVE_VIEW, event)(trial)
+
+
 def run_ray(specs: list[dict], out: Path, address: str | None, view: SweepProgress) -> None:
     """Every trial as a Ray Tune trial with one CPU (and one torch thread). With ``address``,
     the output folder must be on storage that every node of the cluster sees."""
@@ -100,14 +109,16 @@ def run_ray(specs: list[dict], out: Path, address: str | None, view: SweepProgre
     from ray import tune  # noqa: PLC0415
 
     class Progress(tune.Callback):
+        # Tune pickles its callbacks with the experiment's state: the view (it holds a terminal
+        # handle) is reached through a module function, which pickles by reference.
         def on_trial_start(self, iteration, trials, trial, **info):
-            view.start(trial.config["spec"]["id"])
+            _on_trial("start", trial.config["spec"]["id"])
 
         def on_trial_complete(self, iteration, trials, trial, **info):
-            view.finish(trial.config["spec"]["id"])
+            _on_trial("finish", trial.config["spec"]["id"])
 
         def on_trial_error(self, iteration, trials, trial, **info):
-            view.finish(trial.config["spec"]["id"])
+            _on_trial("finish", trial.config["spec"]["id"])
 
     def trainable(config: dict[str, Any]) -> None:
         from pes.experiments.trials import run_trial as run  # noqa: PLC0415
@@ -115,6 +126,8 @@ def run_ray(specs: list[dict], out: Path, address: str | None, view: SweepProgre
         run(config["spec"], Path(config["out"]), threads=1)
         tune.report({"finished": 1})
 
+    global _ACTIVE_VIEW
+    _ACTIVE_VIEW = view
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     ray.init(
         address=address,
@@ -139,6 +152,7 @@ def run_ray(specs: list[dict], out: Path, address: str | None, view: SweepProgre
         if failed:
             raise RuntimeError(f"{len(failed)} trial(s) failed; first: {failed[0].error}")
     finally:
+        _ACTIVE_VIEW = None
         ray.shutdown()
 
 
