@@ -364,6 +364,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         use_ray=False if args.no_ray else None,
         progress=not args.json,
         command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
+        parallel=args.parallel,
     )
     if args.json:
         _print_json(summary)
@@ -609,6 +610,13 @@ def build_parser() -> argparse.ArgumentParser:
         "Ray instance",
     )
     p.add_argument("--no-ray", action="store_true", help="run the trials here, one at a time")
+    p.add_argument(
+        "--parallel",
+        type=_non_negative,
+        default=0,
+        metavar="N",
+        help="with Ray, at most N trials at once (default 0: one per CPU)",
+    )
     p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reproduce)

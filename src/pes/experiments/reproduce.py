@@ -102,9 +102,12 @@ def _on_trial(event: str, trial: str) -> None:
         getattr(_ACTIVE_VIEW, event)(trial)
 
 
-def run_ray(specs: list[dict], out: Path, address: str | None, view: SweepProgress) -> None:
-    """Every trial as a Ray Tune trial with one CPU (and one torch thread). With ``address``,
-    the output folder must be on storage that every node of the cluster sees."""
+def run_ray(
+    specs: list[dict], out: Path, address: str | None, view: SweepProgress, parallel: int = 0
+) -> None:
+    """Every trial as a Ray Tune trial with one CPU (and one torch thread), at most ``parallel``
+    at once (0: as many as the cluster's CPUs). With ``address``, the output folder must be on
+    storage that every node of the cluster sees."""
     import ray  # noqa: PLC0415
     from ray import tune  # noqa: PLC0415
 
@@ -146,6 +149,7 @@ def run_ray(specs: list[dict], out: Path, address: str | None, view: SweepProgre
                 verbose=0,
                 callbacks=[Progress()],
             ),
+            tune_config=tune.TuneConfig(max_concurrent_trials=parallel or None),
         )
         results = tuner.fit()
         failed = [r for r in results if r.error is not None]
@@ -166,10 +170,12 @@ def reproduce(
     use_ray: bool | None = None,
     progress: bool = True,
     command: str = "",
+    parallel: int = 0,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
     ``use_ray``: None uses Ray when it is installed; False runs the trials in this process.
+    ``parallel``: at most this many trials at once under Ray (0: one per CPU).
     """
     from pes.experiments.report import write_report  # noqa: PLC0415
 
@@ -192,7 +198,7 @@ def reproduce(
     view = SweepProgress(len(specs), len(specs) - len(todo), progress)
     try:
         if todo and use_ray:
-            run_ray(todo, out, ray_address, view)
+            run_ray(todo, out, ray_address, view, parallel)
         elif todo:
             run_sequential(todo, out, view)
     finally:
