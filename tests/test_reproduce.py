@@ -75,6 +75,18 @@ def test_rerun_skips_finished_trials(sweep):
 
 
 @pytest.mark.slow
+def test_report_only_runs_nothing(sweep, tmp_path):
+    out, _ = sweep
+    (out / "table4.md").unlink()
+    summary = reproduce(
+        "table4", budget="tiny", seeds=2, out=out, methods=METHODS, use_ray=False, report_only=True
+    )
+    assert summary["ran"] == 0 and summary["skipped"] == 3 and summary["unfinished"] == 3
+    assert "Seeds per method: PID(PF) 1" in (out / "table4.md").read_text()
+    assert not (out / "trials" / "cbc-s1").exists()
+
+
+@pytest.mark.slow
 def test_interrupted_trial_resumes_without_retraining(sweep):
     out, _ = sweep
     trial = out / "trials" / "cbc-s0"

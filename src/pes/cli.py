@@ -365,14 +365,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         progress=not args.json,
         command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
         parallel=args.parallel,
+        report_only=args.report_only,
     )
     if args.json:
         _print_json(summary)
     else:
         print(
-            f"done: {summary['ran']} trial(s) run, {summary['skipped']} already finished "
-            f"({summary['runner']}), {summary['seconds']:.0f} s; wrote in {out}: "
-            + ", ".join(f for f in summary["files"] if "/" not in f)
+            f"done: {summary['ran']} trial(s) run, {summary['skipped']} already finished, "
+            f"{summary['unfinished']} not run ({summary['runner']}), {summary['seconds']:.0f} s; "
+            f"wrote in {out}: " + ", ".join(f for f in summary["files"] if "/" not in f)
         )
     return 0
 
@@ -616,6 +617,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N",
         help="with Ray, at most N trials at once (default 0: one per CPU)",
+    )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="run no trial: write the tables and figures of the trials finished so far",
     )
     p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

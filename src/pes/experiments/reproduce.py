@@ -171,11 +171,13 @@ def reproduce(
     progress: bool = True,
     command: str = "",
     parallel: int = 0,
+    report_only: bool = False,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
     ``use_ray``: None uses Ray when it is installed; False runs the trials in this process.
     ``parallel``: at most this many trials at once under Ray (0: one per CPU).
+    ``report_only``: run nothing; write the report of the trials finished so far.
     """
     from pes.experiments.report import write_report  # noqa: PLC0415
 
@@ -194,8 +196,11 @@ def reproduce(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     todo = [s for s in specs if not (out / "trials" / s["id"] / "done.json").is_file()]
+    finished = len(specs) - len(todo)
+    if report_only:
+        todo = []
     start = time.time()
-    view = SweepProgress(len(specs), len(specs) - len(todo), progress)
+    view = SweepProgress(len(specs), finished, progress and bool(todo))
     try:
         if todo and use_ray:
             run_ray(todo, out, ray_address, view, parallel)
@@ -211,8 +216,9 @@ def reproduce(
         "out": str(out),
         "runner": "ray" if use_ray else "sequential",
         "trials": len(specs),
-        "skipped": len(specs) - len(todo),
+        "skipped": finished,
         "ran": len(todo),
+        "unfinished": len(specs) - finished - len(todo),
         "seconds": round(time.time() - start, 1),
         "files": report,
     }
