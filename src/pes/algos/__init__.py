@@ -8,13 +8,23 @@ surface, used by :func:`pes.algos.trainer.train`: ``adapt_env``, ``act``, ``reco
 
 from __future__ import annotations
 
+from pes.algos.bicnet import BiCNet
 from pes.algos.cbc_tp import CBCTP
+from pes.algos.ddpg import DDPG
 from pes.algos.evader_ddpg import EvaderDDPG
+from pes.algos.maddpg import MADDPG
 
-ALGOS = {"cbc-tp": CBCTP, "cbc": CBCTP, "evader-ddpg": EvaderDDPG}
+ALGOS = {
+    "cbc-tp": CBCTP,
+    "cbc": CBCTP,
+    "maddpg": MADDPG,
+    "ddpg": DDPG,
+    "bicnet": BiCNet,
+    "evader-ddpg": EvaderDDPG,
+}
 """Algorithm name -> learner class (``cbc`` is CBC-TP Net with ``use_tp=False``)."""
 
-PURSUER_ALGOS = ("cbc-tp", "cbc")
+PURSUER_ALGOS = ("cbc-tp", "cbc", "maddpg", "ddpg", "bicnet")
 """Algorithms whose policy controls the pursuers (``pes eval --policy``)."""
 
 __all__ = ["ALGOS", "PURSUER_ALGOS"]

@@ -149,8 +149,8 @@ class CBCTP:
         self.n = env_cfg.num_pursuers
         self.history = env_cfg.history_length
         self.device = device
-        self.actor = PursuerActors(cfg, self.n).to(device)
-        self.critic = PursuerCritics(cfg, self.n).to(device)
+        self.actor = self.make_actor(cfg, self.n).to(device)
+        self.critic = self.make_critic(cfg, self.n).to(device)
         self.tp = (
             TPNet(cfg.tp_hidden, cfg.tp_layers, cfg.horizon).to(device) if cfg.use_tp else None
         )
@@ -193,6 +193,25 @@ class CBCTP:
     def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
         """The training scenario (unchanged: the configured evader plays)."""
         return env_cfg
+
+    # A baseline that trains like CBC-TP with other networks overrides these two (and
+    # ``fixed_swarm``); see maddpg.py and bicnet.py.
+    @staticmethod
+    def make_actor(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
+        """The actor: ``(obs (B, N, N, 8), mask (B, N, N), pred (B, N, 2k) or None)`` ->
+        actions (B, N, 2), with ``pre_activation`` (before the tanh) beside ``forward``."""
+        return PursuerActors(cfg, num_pursuers)
+
+    @staticmethod
+    def make_critic(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
+        """The critic: ``(state (B, A, 8), alive (B, N), actions (B, N, 2), pred)`` -> Q (B, N)."""
+        return PursuerCritics(cfg, num_pursuers)
+
+    @staticmethod
+    def fixed_swarm(cfg: TrainConfig) -> str | None:
+        """Why a trained policy only serves the swarm size it was trained on (None if it
+        serves any)."""
+        return None if cfg.shared else "has one network per pursuer"
 
     # --- acting ----------------------------------------------------------------------------------
     @torch.no_grad()
@@ -364,10 +383,10 @@ class CBCTP:
             out["tp"] = self.tp
         return out
 
-    @staticmethod
-    def build_policy(cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[CBCTPPolicy, dict]:
+    @classmethod
+    def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[CBCTPPolicy, dict]:
         """An untrained policy of this architecture, and its modules by name (to load into)."""
-        actor = PursuerActors(cfg, env_cfg.num_pursuers).to(device)
+        actor = cls.make_actor(cfg, env_cfg.num_pursuers).to(device)
         tp = TPNet(cfg.tp_hidden, cfg.tp_layers, cfg.horizon).to(device) if cfg.use_tp else None
         modules = {"actor": actor} | ({"tp": tp} if tp is not None else {})
         return CBCTPPolicy(actor, tp), modules

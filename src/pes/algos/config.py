@@ -50,7 +50,8 @@ class TrainConfig:
     hidden: int = 256
     """Units of the actor's and the critic's bidirectional LSTM (each direction)."""
     mlp_hidden: int = 64
-    """Units of the MLP after the LSTM."""
+    """Units of the MLP after the LSTM (MADDPG, DDPG: of each of their MLPs' two hidden
+    layers)."""
     tp_hidden: int = 256
     """Units of each TP Net LSTM layer."""
     tp_layers: int = 2
@@ -289,6 +290,25 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     },
 }
 PRESETS["cbc"] = {name: dict(values, use_tp=False) for name, values in PRESETS["cbc-tp"].items()}
+
+# --- off-policy baselines (docs/algorithms/maddpg.md, ddpg.md, bicnet.md) -----------------------
+# The paper gives no settings for its baselines: they take CBC-TP's (§V-A; quick: CBC-TP's quick
+# recipe and training reward), MADDPG's and DDPG's MLPs two hidden layers of mlp_hidden units.
+# Quick budgets are episodes sized to ~20 minutes on one unloaded core: the MLP learners update
+# twice as often (their updates are cheap), BiCNet's LSTMs cost ~3x more per update.
+OFF_POLICY_QUICK = dict(PRESETS["cbc-tp"]["quick"], use_tp=False, time_limit=0.0)
+OFF_POLICY_TINY = dict(PRESETS["cbc-tp"]["tiny"], use_tp=False)
+PRESETS["maddpg"] = {
+    "paper": dict(PAPER, use_tp=False, shared=False),
+    "quick": dict(OFF_POLICY_QUICK, shared=False, episodes=3000, update_every=16),
+    "tiny": dict(OFF_POLICY_TINY, shared=False),
+}
+PRESETS["ddpg"] = {name: dict(values) for name, values in PRESETS["maddpg"].items()}
+PRESETS["bicnet"] = {
+    "paper": dict(PAPER, use_tp=False, actor_gradient="all"),
+    "quick": dict(OFF_POLICY_QUICK, actor_gradient="all", episodes=2000),
+    "tiny": dict(OFF_POLICY_TINY, actor_gradient="all"),
+}
 
 
 def build_train_config(

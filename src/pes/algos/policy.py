@@ -35,19 +35,19 @@ def _read(spec: str | Path) -> tuple[Path, dict, TrainConfig, dict]:
 def load_pursuer_policy(spec: str | Path, env_cfg: EnvConfig, device="cpu"):
     """The pursuer policy in a policy file, run folder, checkpoint or shipped model name, built
     for the scenario ``env_cfg``. Returns (policy, train_config)."""
-    from pes.algos import PURSUER_ALGOS  # noqa: PLC0415
-    from pes.algos.cbc_tp import CBCTP  # noqa: PLC0415
+    from pes.algos import ALGOS, PURSUER_ALGOS  # noqa: PLC0415
 
     path, _, cfg, states = _read(spec)
     if cfg.algo not in PURSUER_ALGOS:
         raise CheckpointError(f"'{path}' holds a '{cfg.algo}' model, not a pursuer policy")
+    learner = ALGOS[cfg.algo]
     trained_n = cfg.env_config().num_pursuers
-    if not cfg.shared and env_cfg.num_pursuers != trained_n:
+    reason = learner.fixed_swarm(cfg)
+    if reason and env_cfg.num_pursuers != trained_n:
         raise CheckpointError(
-            f"'{path}' has one network per pursuer for {trained_n} pursuers; the scenario has "
-            f"{env_cfg.num_pursuers}"
+            f"'{path}' {reason} for {trained_n} pursuers; the scenario has {env_cfg.num_pursuers}"
         )
-    policy, modules = CBCTP.build_policy(cfg, env_cfg, device)
+    policy, modules = learner.build_policy(cfg, env_cfg, device)
     load_modules(modules, states, str(path))
     policy.eval()
     return policy, cfg

@@ -1,0 +1,60 @@
+"""DDPG (Lillicrap et al., 2016) as independent learners: each pursuer has its own actor and its
+own critic, and both see only that pursuer's observation (and its critic only its own action).
+
+It is :class:`pes.algos.maddpg.MADDPG` with decentralised critics: the same MLP actors, replay
+storage, update and target networks; critic i reads pursuer i's Table I observation (N rows of
+8, scaled, with their real-row flags) and its action instead of the global state and every
+action. The other pursuers are part of each learner's environment, so its Q is non-stationary
+while they learn -- the weakness MADDPG's centralised critics address.
+
+``shared=True`` gives one actor and one critic trained on every pursuer's experience (parameter
+sharing); the default is one per pursuer. Damaged pursuers: their rows are zero and flagged 0 in
+the others' observations, and their own Qs are left out of the losses.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from pes.algos.config import TrainConfig
+from pes.algos.features import pursuer_obs
+from pes.algos.maddpg import MADDPG, EnsembleMLP, observation_input
+from pes.algos.nets import RowScaled
+
+
+class LocalCritics(RowScaled):
+    """Critic i: pursuer i's observation (9N numbers, as :class:`pes.algos.maddpg.MLPActors`)
+    and its own action (2) -> MLP (two hidden layers of ``mlp_hidden``) -> Q_i."""
+
+    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
+        self.n = num_pursuers
+        members = 1 if cfg.shared else num_pursuers
+        h = cfg.mlp_hidden
+        self.body = EnsembleMLP(members, [9 * num_pursuers + 2, h, h, 1])
+
+    def each(self, state: Tensor, alive: Tensor, actions: Tensor) -> Tensor:
+        """state (B, A, 8), alive (B, N), actions (N, B, N, 2) (row i: critic i's joint action,
+        of which it reads only a_i) -> Q (B, N)."""
+        obs, mask = pursuer_obs(state, alive)
+        agents = torch.arange(self.n, device=state.device)
+        own = actions[agents, :, agents]  # (N, B, 2)
+        x = torch.cat([observation_input(obs, mask, self.scale), own], dim=-1)
+        return self.body(x).squeeze(-1).transpose(0, 1)
+
+    def forward(
+        self, state: Tensor, alive: Tensor, actions: Tensor, pred: Tensor | None = None
+    ) -> Tensor:
+        """state (B, A, 8), alive (B, N), actions (B, N, 2) -> Q (B, N)."""
+        return self.each(state, alive, actions.unsqueeze(0).expand(self.n, *actions.shape))
+
+
+class DDPG(MADDPG):
+    """Independent DDPG learners (``algo: ddpg``)."""
+
+    name = "ddpg"
+
+    @staticmethod
+    def make_critic(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
+        return LocalCritics(cfg, num_pursuers)
