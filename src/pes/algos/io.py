@@ -98,6 +98,13 @@ def resolve_policy_path(spec: str | Path) -> Path:
             )
         return path
     path = Path(spec)
+    from pes.algos import ALGOS  # noqa: PLC0415 - the registry imports the learners
+
+    if str(spec) in ALGOS and not path.exists():
+        raise CheckpointError(
+            f"no '{spec}' model ships with PES; train one with `pes train --algo {spec}` and "
+            "pass its policy.pt (or run folder)"
+        )
     if path.is_dir():
         for name in ("policy.pt", "checkpoint.pt"):
             if (path / name).is_file():

@@ -35,8 +35,7 @@ def _read(spec: str | Path) -> tuple[Path, dict, TrainConfig, dict]:
 def load_pursuer_policy(spec: str | Path, env_cfg: EnvConfig, device="cpu"):
     """The pursuer policy in a policy file, run folder, checkpoint or shipped model name, built
     for the scenario ``env_cfg``. Returns (policy, train_config)."""
-    from pes.algos import PURSUER_ALGOS  # noqa: PLC0415
-    from pes.algos.cbc_tp import CBCTP  # noqa: PLC0415
+    from pes.algos import ALGOS, PURSUER_ALGOS  # noqa: PLC0415
 
     path, _, cfg, states = _read(spec)
     if cfg.algo not in PURSUER_ALGOS:
@@ -47,7 +46,7 @@ def load_pursuer_policy(spec: str | Path, env_cfg: EnvConfig, device="cpu"):
             f"'{path}' has one network per pursuer for {trained_n} pursuers; the scenario has "
             f"{env_cfg.num_pursuers}"
         )
-    policy, modules = CBCTP.build_policy(cfg, env_cfg, device)
+    policy, modules = ALGOS[cfg.algo].build_policy(cfg, env_cfg, device)
     load_modules(modules, states, str(path))
     policy.eval()
     return policy, cfg
