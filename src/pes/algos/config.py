@@ -126,13 +126,13 @@ class TrainConfig:
     # --- MAAC (soft actor-critic with an attention critic; docs/algorithms/maac.md) ----------
     attention_heads: int = 4
     """MAAC: attention heads of the critic (``hidden`` must be a multiple)."""
-    alpha: float = 0.2
-    """MAAC: initial entropy temperature."""
+    alpha: float = 0.05
+    """MAAC: initial entropy temperature (SAC's 0.2 explored too long in the learning test)."""
     auto_alpha: bool = True
     """MAAC: tune the temperature towards ``target_entropy`` (SAC v2); False keeps ``alpha``."""
     target_entropy: float = -2.0
     """MAAC: target entropy per pursuer (nats; -2 = minus the action dimension)."""
-    lr_alpha: float = 3e-4
+    lr_alpha: float = 1e-3
     """MAAC: learning rate of the temperature."""
     attend_reg: float = 1e-3
     """MAAC: weight of the squared attention logits in the critic loss (as the original)."""
