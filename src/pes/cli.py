@@ -223,21 +223,28 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from pes.record import save_gif, save_record
+    from pes.record import load_record, save_gif, save_mp4, save_plot, save_record
 
     out = Path(args.out)
     suffix = out.suffix.lower()
-    if suffix not in (".gif", ".json"):
-        raise ConfigError(f"--out must end in .gif or .json, got '{out.name}'")
-    config = _scenario(args, crash_mode="disable", **_opponent())
+    writers = {
+        ".gif": lambda record, path: save_gif(record, path, every=args.every),
+        ".mp4": lambda record, path: save_mp4(record, path, every=args.every),
+        ".png": save_plot,
+        ".json": save_record,
+    }
+    if suffix not in writers:
+        raise ConfigError(f"--out must end in .gif, .mp4, .png or .json, got '{out.name}'")
+    if args.record is not None:
+        records = [load_record(args.record)]
+    else:
+        config = _scenario(args, crash_mode="disable", **_opponent())
+        records = (_run_episode(config, args.policy, args.seed + k) for k in range(args.episodes))
+    many = args.record is None and args.episodes > 1
     written = []
-    for k in range(args.episodes):
-        record = _run_episode(config, args.policy, args.seed + k)
-        path = out if args.episodes == 1 else out.with_name(f"{out.stem}_{k}{out.suffix}")
-        if suffix == ".gif":
-            save_gif(record, path, every=args.every)
-        else:
-            save_record(record, path)
+    for k, record in enumerate(records):
+        path = out.with_name(f"{out.stem}_{k}{out.suffix}") if many else out
+        writers[suffix](record, path)
         written.append(
             {
                 "path": str(path),
@@ -311,6 +318,32 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export_onnx(args: argparse.Namespace) -> int:
+    from pes.record.onnx_export import export_onnx
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".onnx":
+        raise ConfigError(f"OUT must end in .onnx, got '{out.name}'")
+    summary = export_onnx(args.checkpoint, out, opset=args.opset, check=args.check)
+    if args.json:
+        _print_json(summary)
+    else:
+        sizes = summary["num_pursuers"]
+        print(
+            f"wrote {out} ({summary['algo']}, {summary['bytes'] / 1e6:.2f} MB, opset "
+            f"{summary['opset']}, {sizes} pursuers, dynamic batch)"
+        )
+        for kind in ("inputs", "outputs"):
+            shapes = ", ".join(f"{k} {v}" for k, v in summary[kind].items())
+            print(f"  {kind}: {shapes}")
+        if "max_abs_error" in summary:
+            print(
+                f"  onnxruntime vs PyTorch: max abs error {summary['max_abs_error']:.1e} on "
+                f"random inputs with {summary['checked_num_pursuers']} pursuers"
+            )
+    return 0
+
+
 # --- the parser ------------------------------------------------------------------------------
 
 
@@ -379,12 +412,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "render",
-        help="record episodes as GIF or JSON",
-        description="Record episodes of a policy to FILE.gif (top-down "
-        "animation) or FILE.json (episode record, for pes view).",
+        help="record episodes as GIF, MP4, PNG plot or JSON",
+        description="Record episodes of a policy (or redraw a saved episode record) to "
+        "FILE.gif or FILE.mp4 (top-down animation; MP4 is H.264), FILE.png (every vehicle's "
+        "path, damaged pursuers, the capture point and TP Net's predictions on the map) or "
+        "FILE.json (episode record, for pes view).",
     )
-    p.add_argument("--policy", required=True, help="pid-pf or random")
-    p.add_argument("--out", required=True, metavar="FILE", help="FILE.gif or FILE.json")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument(
+        "--policy",
+        help="pid-pf, random, cbc-tp (the shipped swarm), or a policy.pt / checkpoint / run folder",
+    )
+    source.add_argument(
+        "--record", metavar="FILE.json", help="draw this episode record instead of running one"
+    )
+    p.add_argument(
+        "--out", required=True, metavar="FILE", help="FILE.gif, FILE.mp4, FILE.png or FILE.json"
+    )
     p.add_argument(
         "--episodes",
         type=_positive,
@@ -393,7 +437,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
     p.add_argument(
-        "--every", type=_positive, default=2, help="GIF: draw every K-th step (default: 2)"
+        "--every",
+        type=_positive,
+        default=2,
+        help="GIF/MP4: draw every K-th step (default: 2)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
@@ -454,6 +501,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser(
+        "export-onnx",
+        help="a CBC-TP / CBC policy (actor + TP Net) as one ONNX graph",
+        description="Export the actor of a cbc-tp or cbc policy, with its TP Net, as one ONNX "
+        "graph with a dynamic number of pursuers and a dynamic batch (inputs obs, alive, "
+        "history; outputs actions and prediction; see docs/export.md). Then run the file with "
+        "onnxruntime on random inputs and report its largest difference from PyTorch.",
+    )
+    p.add_argument(
+        "checkpoint",
+        metavar="CHECKPOINT",
+        help="cbc-tp (the shipped swarm), or a policy.pt / checkpoint.pt / run folder",
+    )
+    p.add_argument("out", metavar="OUT.onnx", help="the ONNX file to write")
+    p.add_argument(
+        "--opset",
+        type=_positive,
+        default=None,
+        help="ONNX opset, 18 or above (default: torch's, 20 with torch 2.13)",
+    )
+    p.add_argument(
+        "--check",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="compare onnxruntime with PyTorch on random inputs (default: on)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_export_onnx)
     return parser
 
 

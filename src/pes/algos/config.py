@@ -148,6 +148,9 @@ class TrainConfig:
     """Minutes between checkpoints (one is also written at the end)."""
     checkpoint_buffer: bool = True
     """Save the replay buffer's contents in checkpoints (exact resumption)."""
+    snapshots: bool = False
+    """Also keep the policy of every log row as ``snapshots/ep<episodes>.pt`` (to choose an
+    opponent of a given strength afterwards, as the shipped evader was chosen)."""
     eval_episodes: int = 100
     """Episodes of the evaluation at the end of training (0 = none)."""
     tensorboard: bool = True

@@ -335,6 +335,9 @@ def train(
                 }
                 row.update({k: v / stats_count[k] for k, v in stats_sum.items()})
                 logger.write(row)
+                if cfg.snapshots:
+                    (out / "snapshots").mkdir(exist_ok=True)
+                    save_policy(out / "snapshots" / f"ep{prog.episodes:06d}.pt", meta())
                 score = learner.score(row["success_rate"], row["episode_steps"])
                 if score > prog.best_score:
                     prog.best_score = score
