@@ -20,7 +20,7 @@ One update (every ``update_every`` transitions after ``warmup``):
 2. actors: every alive pursuer samples a new action (reparameterised); pursuer i's loss is
    alpha * log pi(a_i | o_i) - min_k Q_k,i(s, a), where the others' new actions enter Q_i
    detached (they are MAAC's "current policies of the other agents"), so the gradient is
-   dQ_i/da_i only; plus ``action_reg`` times the squared pre-tanh mean (as CBC-TP's actor);
+   dQ_i/da_i only;
 3. the temperature alpha, towards ``target_entropy`` per pursuer (``auto_alpha``);
 4. soft target updates (``tau``).
 
@@ -75,11 +75,7 @@ class SquashedGaussianActor(nn.Module):
 
     def sample(self, obs: Tensor, mask: Tensor, gen: torch.Generator) -> tuple[Tensor, Tensor]:
         """Reparameterised actions (B, N, 2) in (-1, 1) and their log-probabilities (B, N)."""
-        return self.sample_from(*self(obs, mask), gen)
-
-    @staticmethod
-    def sample_from(mean: Tensor, log_std: Tensor, gen: torch.Generator) -> tuple[Tensor, Tensor]:
-        """:meth:`sample` given the pre-tanh mean and log std (B, N, 2)."""
+        mean, log_std = self(obs, mask)
         eps = torch.randn(mean.shape, generator=gen).to(mean.device)
         u = mean + eps * log_std.exp()
         # log pi(a) = log N(u) - sum log(1 - tanh(u)^2), written stably
@@ -254,17 +250,13 @@ class MAAC:
         optimise(self.opt_critic, critic_loss, self.critics.parameters(), cfg.grad_clip)
 
         obs, mask = pursuer_obs(state, alive)
-        mean, log_std = self.actor(obs, mask)
-        new_action, logp = self.actor.sample_from(mean, log_std, gen)
+        new_action, logp = self.actor.sample(obs, mask, gen)
         self.critics.requires_grad_(False)
         q_pi = torch.min(
             *(c(state, alive, new_action.detach(), new_action)[0] for c in self.critics)
         )
         self.critics.requires_grad_(True)
-        # CBC-TP's regulariser on the squared pre-tanh mean (action_reg), so that the means do
-        # not drift into the tanh's flat ends, where dQ/da no longer reaches them.
-        reg = masked_mean((mean**2).sum(-1), alive)
-        actor_loss = masked_mean(alpha * logp - q_pi, alive) + cfg.action_reg * reg
+        actor_loss = masked_mean(alpha * logp - q_pi, alive)
         optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
 
         if cfg.auto_alpha:
@@ -275,7 +267,8 @@ class MAAC:
             optimise(self.opt_alpha, alpha_loss, self.temperature.parameters(), 0.0)
         soft_update(self.critics_target, self.critics, cfg.tau)
         self.updates += 1
-        std = log_std.detach().exp().mean(-1)
+        with torch.no_grad():
+            std = self.actor(obs, mask)[1].exp().mean(-1)
         return {
             "critic_loss": float(critic_loss.detach()),
             "actor_loss": float(actor_loss.detach()),
