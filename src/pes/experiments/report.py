@@ -4,7 +4,7 @@ captions, and each trial's CSV log, from the finished trials of an output folder
 Files (in the output folder): ``table4.md``, ``table5.md``, ``table6.md``, ``figures.md`` (the
 captions) with ``figures/*.png``, ``logs/<trial>.csv`` (each training run's progress log),
 ``evals.json`` (every evaluation's figures) and ``reproduce.json`` (settings, hardware, times).
-Mean ± std is over seeds (the sample standard deviation; 0 with one seed).
+Mean ± std is over seeds (the sample standard deviation; a single seed shows its value alone).
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ def _fmt(values: list[float], scale: float = 1.0, digits: int = 1, unit: str = "
     if not values:
         return "—"
     mean, std = _stats([v * scale for v in values])
+    if len(values) == 1:  # one seed: no spread to show
+        return f"{mean:.{digits}f}{unit}"
     return f"{mean:.{digits}f} ± {std:.{digits}f}{unit}"
 
 
