@@ -9,8 +9,6 @@ import math
 import torch
 from torch import Tensor, nn
 
-from pes.errors import CheckpointError
-
 
 def target_copy(net: nn.Module) -> nn.Module:
     """A frozen copy of ``net`` to serve as its target network."""
@@ -68,15 +66,3 @@ def gaussian_log_prob(x: Tensor, mean: Tensor, log_std: Tensor) -> Tensor:
     """Log density of ``x`` under N(mean, exp(log_std)^2), summed over the last dimension."""
     z = (x - mean) * torch.exp(-log_std)
     return (-0.5 * z**2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
-
-
-def check_swarm_size(cfg, env_cfg) -> int:
-    """The number of pursuers a fixed-size network (``cfg``, a TrainConfig) was trained for;
-    a CheckpointError if the scenario ``env_cfg`` has another number."""
-    trained_n = cfg.env_config().num_pursuers
-    if env_cfg.num_pursuers != trained_n:
-        raise CheckpointError(
-            f"a '{cfg.algo}' policy is built for {trained_n} pursuers; the scenario has "
-            f"{env_cfg.num_pursuers}"
-        )
-    return trained_n

@@ -38,7 +38,6 @@ from torch import Tensor, nn
 from pes.algos.buffer import ReplayBuffer
 from pes.algos.common import (
     ActorPolicy,
-    check_swarm_size,
     gaussian_log_prob,
     masked_mean,
     optimise,
@@ -304,6 +303,7 @@ class MAAC:
     @staticmethod
     def build_policy(cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[ActorPolicy, dict]:
         """An untrained policy of this architecture, and its modules by name (to load into).
-        The flat-observation actors serve only the swarm size they were trained for."""
-        actor = SquashedGaussianActor(cfg, check_swarm_size(cfg, env_cfg)).to(device)
+        The flat-observation actors serve only the swarm size they were trained for
+        (:func:`pes.algos.policy.load_pursuer_policy` checks it, see ``fixed_swarm``)."""
+        actor = SquashedGaussianActor(cfg, env_cfg.num_pursuers).to(device)
         return ActorPolicy(actor), {"actor": actor}
