@@ -51,6 +51,7 @@ def main() -> None:
     parser.add_argument("--command", required=True, help="the exact training command")
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--seed", type=int, default=0, help="evaluation seed")
+    parser.add_argument("--note", default="", help="how this file was chosen (model card)")
     args = parser.parse_args()
     torch.set_num_threads(2)
 
@@ -113,6 +114,7 @@ def main() -> None:
             if "best_at" in meta
             else ""
         ),
+        *([f"* {args.note}"] if args.note else []),
         f"* hardware: {machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']} "
         "(CPU)",
         "",

@@ -89,6 +89,47 @@ def test_render_gif_and_json(tmp_path, capsys):
     assert load_record(tmp_path / "ep_1.json")["outcome"]["steps"] <= 10
 
 
+def test_render_mp4_and_png(tmp_path, capsys):
+    """An MP4 of a run, then a PNG plot redrawn from a saved record."""
+    out = run_json(
+        capsys,
+        "render",
+        "--policy",
+        "pid-pf",
+        "--out",
+        str(tmp_path / "ep.mp4"),
+        "--every",
+        "4",
+        "--json",
+        "--set",
+        "max_steps=12",
+    )
+    mp4 = tmp_path / "ep.mp4"
+    assert out["files"][0]["path"] == str(mp4) and mp4.read_bytes()[4:8] == b"ftyp"
+    argv = [
+        "render",
+        "--policy",
+        "pid-pf",
+        "--out",
+        str(tmp_path / "ep.json"),
+        "--set",
+        "max_steps=12",
+    ]
+    assert main(argv) == 0
+    capsys.readouterr()
+    out = run_json(
+        capsys,
+        "render",
+        "--record",
+        str(tmp_path / "ep.json"),
+        "--out",
+        str(tmp_path / "ep.png"),
+        "--json",
+    )
+    assert out["files"][0]["path"] == str(tmp_path / "ep.png")
+    assert (tmp_path / "ep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_bench(capsys):
     out = run_json(
         capsys, "bench", "--num-envs", "1", "4", "--steps", "10", "--no-compile", "--json"
@@ -122,7 +163,8 @@ def test_bench(capsys):
             ],
             "no free room",
         ),
-        (["render", "--policy", "pid-pf", "--out", "x.png"], "gif or .json"),
+        (["render", "--policy", "pid-pf", "--out", "x.avi"], ".png or .json"),
+        (["render", "--record", "missing.json", "--out", "x.png"], "not found"),
         (["eval", "--policy", "pid-pf", "--device", "cuda:9"], "cuda"),
     ],
 )
@@ -154,7 +196,7 @@ def test_mistakes_through_the_real_command():
 
 
 def test_every_command_has_help():
-    for command in ["demo", "eval", "render", "bench"]:
+    for command in ["demo", "eval", "render", "bench", "export-onnx"]:
         proc = subprocess.run(
             [sys.executable, "-m", "pes.cli", command, "--help"],
             capture_output=True,

@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 import torch
 
 import pes
 from pes.errors import CheckpointError
 from pes.policies import PIDPotentialField
-from pes.record import EpisodeRecorder, load_record, render_frames, save_gif, save_record
+from pes.record import (
+    EpisodeRecorder,
+    load_record,
+    plot_trajectories,
+    render_frames,
+    save_gif,
+    save_mp4,
+    save_plot,
+    save_record,
+)
 
 
 def _record(**config) -> dict:
@@ -71,3 +81,54 @@ def test_gif_frames_change(tmp_path):
 
     with Image.open(path) as image:
         assert image.n_frames == 6
+
+
+def test_mp4_decodes_to_the_rendered_frames(tmp_path):
+    import imageio.v2 as imageio
+    import numpy as np
+
+    record = _record()
+    path = save_mp4(record, tmp_path / "ep.mp4", fps=10, every=5, hold=0.5)
+    reader = imageio.get_reader(path, format="FFMPEG")
+    try:
+        assert reader.get_meta_data()["codec"] == "h264"
+        frames = [frame for frame in reader]
+    finally:
+        reader.close()
+    assert len(frames) == 6 + 5  # steps 0, 5, ..., 25, then the last held 0.5 s at 10 fps
+    rendered = [np.asarray(image, dtype=float) for image in render_frames(record, every=5)]
+    assert frames[0].shape == rendered[0].shape == (628, 600, 3)
+    # Lossy, but each decoded frame is nearest to the picture it encodes (the held ones: the
+    # last), and near it.
+    for k, frame in enumerate(frames):
+        gaps = [np.abs(frame - image).mean() for image in rendered]
+        assert int(np.argmin(gaps)) == min(k, 5) and min(gaps) < 2.0
+
+
+def test_trajectory_plot(tmp_path):
+    from PIL import Image
+
+    record = _record(crash_mode="disable", damaged=2)
+    path = save_plot(record, tmp_path / "ep.png")
+    with Image.open(path) as image:
+        pixels = np.asarray(image.convert("RGB"))
+    assert pixels.shape[0] > 500 and pixels.shape[1] > 500
+    assert (pixels < 250).any(-1).mean() > 0.1  # not blank: buildings, paths, axes
+    assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 20
+
+    # On a given Axes (figures of several episodes): the evader's path is drawn from the record,
+    # the two damaged pursuers marked, the TP predictions drawn.
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    left, right = fig.subplots(1, 2)
+    ax = plot_trajectories(record, ax=right, title="with TP Net", prediction_every=5)
+    assert ax is right and ax.get_title() == "with TP Net" and not left.lines
+    evader_x = [f["pos"][-1][0] for f in record["frames"]]
+    assert any(list(line.get_xdata()) == evader_x for line in ax.lines)
+    assert sum(line.get_marker() == "X" for line in ax.lines) == 2
+    predicted = [f for f in record["frames"][::5] if f.get("pred")]  # frame 0 has none
+    assert len(predicted) == 5
+    assert sum(line.get_color() == "#ff7f0e" for line in ax.lines) == 2 * len(predicted)
+    with pytest.raises(pes.PESError, match="no frames"):
+        plot_trajectories(dict(record, frames=[]))

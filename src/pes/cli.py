@@ -14,8 +14,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from pes import __version__
 from pes.config import load_yaml, parse_override
 from pes.errors import ConfigError, PESError
@@ -115,31 +113,10 @@ def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"
 
 def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "cpu"):
     """One recorded episode of ``policy_name``: returns the episode record."""
-    from pes.record import EpisodeRecorder
-    from pes.sim.env import make_env
+    from pes.record import record_episode
 
-    env = make_env(config, num_envs=1, device=device, seed=seed)
     policy = make_policy(policy_name, config, seed=seed, device=device)
-    obs, info = env.reset(seed=seed)
-    recorder = EpisodeRecorder(env)
-    arena = torch.tensor([config.arena_width, config.arena_height])
-
-    def act():  # the actions, and the evader positions the policy predicts (m), if any
-        actions = policy(obs, info)
-        pred = getattr(policy, "last_prediction", None)
-        return actions, None if pred is None else pred[0] * arena
-
-    with torch.no_grad():
-        actions, pred = act()
-        recorder.start(pred)
-        while not recorder.finished:
-            obs, _, terminated, truncated, info = env.step(actions)
-            if bool(terminated[0] | truncated[0]):  # obs is already the next episode's
-                recorder.add(info)
-            else:
-                actions, pred = act()
-                recorder.add(info, pred)
-    return recorder.record()
+    return record_episode(policy, config, seed=seed, device=device)
 
 
 # --- commands --------------------------------------------------------------------------------
@@ -223,21 +200,28 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from pes.record import save_gif, save_record
+    from pes.record import load_record, save_gif, save_mp4, save_plot, save_record
 
     out = Path(args.out)
     suffix = out.suffix.lower()
-    if suffix not in (".gif", ".json"):
-        raise ConfigError(f"--out must end in .gif or .json, got '{out.name}'")
-    config = _scenario(args, crash_mode="disable", **_opponent())
+    writers = {
+        ".gif": lambda record, path: save_gif(record, path, every=args.every),
+        ".mp4": lambda record, path: save_mp4(record, path, every=args.every),
+        ".png": save_plot,
+        ".json": save_record,
+    }
+    if suffix not in writers:
+        raise ConfigError(f"--out must end in .gif, .mp4, .png or .json, got '{out.name}'")
+    if args.record is not None:
+        records = [load_record(args.record)]
+    else:
+        config = _scenario(args, crash_mode="disable", **_opponent())
+        records = (_run_episode(config, args.policy, args.seed + k) for k in range(args.episodes))
+    many = args.record is None and args.episodes > 1
     written = []
-    for k in range(args.episodes):
-        record = _run_episode(config, args.policy, args.seed + k)
-        path = out if args.episodes == 1 else out.with_name(f"{out.stem}_{k}{out.suffix}")
-        if suffix == ".gif":
-            save_gif(record, path, every=args.every)
-        else:
-            save_record(record, path)
+    for k, record in enumerate(records):
+        path = out.with_name(f"{out.stem}_{k}{out.suffix}") if many else out
+        writers[suffix](record, path)
         written.append(
             {
                 "path": str(path),
@@ -251,6 +235,32 @@ def cmd_render(args: argparse.Namespace) -> int:
         )
     if args.json:
         _print_json({"files": written})
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    import webbrowser
+
+    from pes.record.viewer import write_page
+
+    page, record = write_page(args.record, args.out)
+    opened = webbrowser.open(page.resolve().as_uri()) if args.open else False
+    outcome = record["outcome"]
+    if args.json:
+        _print_json(
+            {
+                "record": args.record,
+                "page": str(page),
+                "bytes": page.stat().st_size,
+                "steps": len(record["frames"]) - 1,
+                "success": outcome["success"],
+                "opened": opened,
+            }
+        )
+    else:
+        print(f"wrote {page} ({len(record['frames']) - 1} steps); open it in a browser")
+        if args.open and not opened:
+            print("(no browser could be started here)", file=sys.stderr)
     return 0
 
 
@@ -308,6 +318,63 @@ def cmd_bench(args: argparse.Namespace) -> int:
     )
     if args.json:
         _print_json(results)
+    return 0
+
+
+def cmd_export_onnx(args: argparse.Namespace) -> int:
+    from pes.record.onnx_export import export_onnx
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".onnx":
+        raise ConfigError(f"OUT must end in .onnx, got '{out.name}'")
+    summary = export_onnx(args.checkpoint, out, opset=args.opset, check=args.check)
+    if args.json:
+        _print_json(summary)
+    else:
+        sizes = summary["num_pursuers"]
+        print(
+            f"wrote {out} ({summary['algo']}, {summary['bytes'] / 1e6:.2f} MB, opset "
+            f"{summary['opset']}, {sizes} pursuers, dynamic batch)"
+        )
+        for kind in ("inputs", "outputs"):
+            shapes = ", ".join(f"{k} {v}" for k, v in summary[kind].items())
+            print(f"  {kind}: {shapes}")
+        if "max_abs_error" in summary:
+            print(
+                f"  onnxruntime vs PyTorch: max abs error {summary['max_abs_error']:.1e} on "
+                f"random inputs with {summary['checked_num_pursuers']} pursuers"
+            )
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    import shlex
+
+    from pes.experiments.reproduce import reproduce
+
+    out = args.out or f"runs/reproduce-{args.budget}"
+    _say(args, f"reproducing {args.target} ({args.budget} budget, {args.seeds} seeds) into {out}")
+    summary = reproduce(
+        args.target,
+        budget=args.budget,
+        seeds=args.seeds,
+        out=out,
+        methods=args.methods,
+        ray_address=args.ray_address,
+        use_ray=False if args.no_ray else None,
+        progress=not args.json,
+        command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
+        parallel=args.parallel,
+        report_only=args.report_only,
+    )
+    if args.json:
+        _print_json(summary)
+    else:
+        print(
+            f"done: {summary['ran']} trial(s) run, {summary['skipped']} already finished, "
+            f"{summary['unfinished']} not run ({summary['runner']}), {summary['seconds']:.0f} s; "
+            f"wrote in {out}: " + ", ".join(f for f in summary["files"] if "/" not in f)
+        )
     return 0
 
 
@@ -379,12 +446,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "render",
-        help="record episodes as GIF or JSON",
-        description="Record episodes of a policy to FILE.gif (top-down "
-        "animation) or FILE.json (episode record, for pes view).",
+        help="record episodes as GIF, MP4, PNG plot or JSON",
+        description="Record episodes of a policy (or redraw a saved episode record) to "
+        "FILE.gif or FILE.mp4 (top-down animation; MP4 is H.264), FILE.png (every vehicle's "
+        "path, damaged pursuers, the capture point and TP Net's predictions on the map) or "
+        "FILE.json (episode record, for pes view).",
     )
-    p.add_argument("--policy", required=True, help="pid-pf or random")
-    p.add_argument("--out", required=True, metavar="FILE", help="FILE.gif or FILE.json")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument(
+        "--policy",
+        help="pid-pf, random, cbc-tp (the shipped swarm), or a policy.pt / checkpoint / run folder",
+    )
+    source.add_argument(
+        "--record", metavar="FILE.json", help="draw this episode record instead of running one"
+    )
+    p.add_argument(
+        "--out", required=True, metavar="FILE", help="FILE.gif, FILE.mp4, FILE.png or FILE.json"
+    )
     p.add_argument(
         "--episodes",
         type=_positive,
@@ -393,11 +471,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
     p.add_argument(
-        "--every", type=_positive, default=2, help="GIF: draw every K-th step (default: 2)"
+        "--every",
+        type=_positive,
+        default=2,
+        help="GIF/MP4: draw every K-th step (default: 2)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser(
+        "view",
+        help="the interactive 3-D replay of an episode record (an HTML page)",
+        description="Write a self-contained HTML page (works offline, from disk) that replays "
+        "an episode record in 3-D: buildings, vehicles, trails, predictions, capture radius, "
+        "with a timeline and an orbiting camera.",
+    )
+    p.add_argument("record", metavar="EPISODE.json", help="an episode record (pes render / demo)")
+    p.add_argument("--out", metavar="PAGE.html", help="the page (default: EPISODE.html)")
+    p.add_argument("--open", action="store_true", help="open the page in the web browser")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_view)
 
     from pes.algos import ALGOS
 
@@ -454,6 +548,84 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser(
+        "export-onnx",
+        help="a CBC-TP / CBC policy (actor + TP Net) as one ONNX graph",
+        description="Export the actor of a cbc-tp or cbc policy, with its TP Net, as one ONNX "
+        "graph with a dynamic number of pursuers and a dynamic batch (inputs obs, alive, "
+        "history; outputs actions and prediction; see docs/export.md). Then run the file with "
+        "onnxruntime on random inputs and report its largest difference from PyTorch.",
+    )
+    p.add_argument(
+        "checkpoint",
+        metavar="CHECKPOINT",
+        help="cbc-tp (the shipped swarm), or a policy.pt / checkpoint.pt / run folder",
+    )
+    p.add_argument("out", metavar="OUT.onnx", help="the ONNX file to write")
+    p.add_argument(
+        "--opset",
+        type=_positive,
+        default=None,
+        help="ONNX opset, 18 or above (default: torch's, 20 with torch 2.13)",
+    )
+    p.add_argument(
+        "--check",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="compare onnxruntime with PyTorch on random inputs (default: on)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_export_onnx)
+
+    p = sub.add_parser(
+        "reproduce",
+        help="run the paper's experiments: tables IV-VI and figures 6-13",
+        description="Train and evaluate every method over several seeds and write the paper's "
+        "tables (Markdown, beside the paper's numbers), figures (PNG) and each trial's CSV log "
+        "into --out. Trials run as Ray Tune trials (one CPU each) when Ray is installed, else "
+        "one after the other; re-running skips finished trials and resumes interrupted ones "
+        "(see docs/reproduce.md).",
+    )
+    p.add_argument("target", choices=["table4", "table5", "table6", "figures", "all"])
+    p.add_argument(
+        "--budget",
+        choices=["quick", "paper", "tiny"],
+        default="quick",
+        help="training presets and evaluation size: quick (laptop CPU), paper (the paper's "
+        "settings), tiny (a one-minute check of the pipeline) (default: quick)",
+    )
+    p.add_argument("--seeds", type=_positive, default=3, help="seeds per method (default: 3)")
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        metavar="M",
+        help="only these methods (default: every one available: pid-pf and the learners)",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="A",
+        help="run the trials on this Ray cluster (its nodes must see --out); default: a local "
+        "Ray instance",
+    )
+    p.add_argument("--no-ray", action="store_true", help="run the trials here, one at a time")
+    p.add_argument(
+        "--parallel",
+        type=_non_negative,
+        default=0,
+        metavar="N",
+        help="with Ray, at most N trials at once (default 0: one per CPU)",
+    )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="run no trial: write the tables and figures of the trials finished so far",
+    )
+    p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_reproduce)
     return parser
 
 

@@ -1,4 +1,4 @@
-"""Replay storage shared by the off-policy learners.
+"""Replay storage shared by the off-policy learners, and the on-policy rollout (PPO).
 
 :class:`ReplayBuffer` is a ring of ``rows`` time steps of ``num_envs`` environments (time-major,
 each field shaped (rows, num_envs, ...)), filled by batched collection one vector step at a
@@ -145,3 +145,98 @@ class ReplayBuffer:
             self.data[k][: v.shape[0]] = v.to(self.device)
         self.next_row = int(state["next_row"])
         self.filled = int(state["filled"])
+
+
+class RolloutBuffer:
+    """On-policy storage of one rollout: ``steps`` vector steps of ``num_envs`` environments,
+    time-major (each field shaped (steps, num_envs, ...)), filled by :meth:`add` and emptied by
+    :meth:`clear` after the update that consumes it.
+
+    A rollout in progress is not checkpointed (:meth:`state_dict` holds only the sizes): a
+    resumed run starts a new rollout, as its environments start new episodes.
+
+    Args:
+        steps: vector steps per rollout.
+        num_envs: environments written per :meth:`add`.
+        fields: name -> (per-step shape, dtype).
+        device: where the storage lives.
+    """
+
+    def __init__(
+        self, steps: int, num_envs: int, fields: FieldSpec, device: torch.device | str = "cpu"
+    ) -> None:
+        if steps < 1:
+            raise ConfigError(f"a rollout needs at least 1 step, got {steps}")
+        self.steps = steps
+        self.num_envs = num_envs
+        self.device = torch.device(device)
+        self.data = {
+            name: torch.zeros((steps, num_envs, *shape), dtype=dtype, device=self.device)
+            for name, (shape, dtype) in fields.items()
+        }
+        self.filled = 0
+        """Vector steps stored so far."""
+
+    def __len__(self) -> int:
+        return self.filled * self.num_envs
+
+    @property
+    def full(self) -> bool:
+        return self.filled == self.steps
+
+    def add(self, **values: Tensor) -> None:
+        """Write one vector step: every field shaped (num_envs, ...)."""
+        if self.full:
+            raise RuntimeError("the rollout is full: update and clear() it first")
+        for name, store in self.data.items():
+            store[self.filled] = values[name]
+        self.filled += 1
+
+    def clear(self) -> None:
+        self.filled = 0
+
+    def state_dict(self) -> dict:
+        return {"steps": self.steps, "num_envs": self.num_envs}
+
+    def load_state_dict(self, state: dict) -> None:
+        """Check the sizes and start an empty rollout."""
+        if state["steps"] != self.steps or state["num_envs"] != self.num_envs:
+            raise ValueError(
+                f"rollout of {state['steps']}x{state['num_envs']} steps cannot be loaded into one "
+                f"of {self.steps}x{self.num_envs}"
+            )
+        self.clear()
+
+
+def gae(
+    reward: Tensor,
+    value: Tensor,
+    next_nonterminal: Tensor,
+    last_value: Tensor,
+    gamma: float,
+    lam: float,
+) -> tuple[Tensor, Tensor]:
+    """Generalised advantage estimation (Schulman et al., 2016) over a time-major rollout.
+
+    Args:
+        reward: (T, ...) rewards (a truncated episode's last reward already holds
+            ``gamma * V(final state)``).
+        value: (T, ...) V(s_t) as estimated while acting.
+        next_nonterminal: (T, ...) 1 where s_{t+1} continues the same agent's episode, 0 where
+            the episode ended (or the agent died) at step t.
+        last_value: (...) V of the state after the rollout's last step.
+        gamma: discount; lam: the GAE lambda.
+
+    Returns:
+        advantages (T, ...) and returns ``advantages + value`` (the value targets).
+    """
+    adv = torch.zeros_like(reward)
+    running = torch.zeros_like(last_value)
+    next_value = last_value
+    for t in range(reward.shape[0] - 1, -1, -1):
+        keep = next_nonterminal[t]
+        delta = reward[t] + gamma * keep * next_value - value[t]
+        running = delta + gamma * lam * keep * running
+        adv[t] = running
+        next_value = value[t]
+    return adv, adv + value

@@ -1,8 +1,10 @@
-"""Pieces every learner shares: soft target updates, optimiser steps, seeded generators."""
+"""Pieces every learner shares: soft target updates, optimiser steps, masked means, Gaussian
+log-densities, the deterministic policy of a trained actor."""
 
 from __future__ import annotations
 
 import copy
+import math
 
 import torch
 from torch import Tensor, nn
@@ -36,3 +38,31 @@ def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     """Mean of ``x`` over the entries where ``mask`` is true (0 if there are none)."""
     w = mask.to(x.dtype)
     return (x * w).sum() / w.sum().clamp(min=1.0)
+
+
+def pursuer_score(success_rate: float, episode_steps: float) -> float:
+    """Training score of a log row for pursuer learners (higher is better): success, then
+    speed."""
+    return success_rate - 1e-5 * episode_steps
+
+
+class ActorPolicy(nn.Module):
+    """A trained pursuer actor as a :class:`pes.policies.Policy`, acting deterministically:
+    ``actor.mean_action(obs (E, N, N, 8), mask (E, N, N))`` gives the (E, N, 2) actions."""
+
+    def __init__(self, actor: nn.Module) -> None:
+        super().__init__()
+        self.actor = actor
+
+    @torch.no_grad()
+    def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
+        return self.actor.mean_action(obs, info["obs_mask"])
+
+    def reset(self, mask: Tensor | None = None) -> None:
+        """Stateless between steps."""
+
+
+def gaussian_log_prob(x: Tensor, mean: Tensor, log_std: Tensor) -> Tensor:
+    """Log density of ``x`` under N(mean, exp(log_std)^2), summed over the last dimension."""
+    z = (x - mean) * torch.exp(-log_std)
+    return (-0.5 * z**2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)

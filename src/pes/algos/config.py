@@ -107,6 +107,37 @@ class TrainConfig:
     noise_decay: float = 0.5
     """Fraction of the episodes over which the noise scale decays."""
 
+    # --- PPO (on-policy; docs/algorithms/ppo.md) ---------------------------------------------
+    rollout_steps: int = 128
+    """PPO: vector steps per rollout (a rollout holds ``rollout_steps * num_envs`` transitions,
+    each with N pursuer samples); ``batch_size`` is the minibatch in transitions."""
+    ppo_epochs: int = 10
+    """PPO: passes over each rollout."""
+    gae_lambda: float = 0.95
+    """PPO: lambda of generalised advantage estimation."""
+    clip_coef: float = 0.2
+    """PPO: clipping range of the probability ratio."""
+    ent_coef: float = 0.0
+    """PPO: weight of the entropy bonus in the actor loss."""
+    target_kl: float = 0.0
+    """PPO: stop a rollout's epochs once the approximate KL exceeds this (0 = never)."""
+    log_std_init: float = -0.5
+    """PPO: initial log standard deviation of the Gaussian policy (in action units)."""
+
+    # --- MAAC (soft actor-critic with an attention critic; docs/algorithms/maac.md) ----------
+    attention_heads: int = 4
+    """MAAC: attention heads of the critic (``hidden`` must be a multiple)."""
+    alpha: float = 0.05
+    """MAAC: initial entropy temperature (SAC's 0.2 explored too long in the learning test)."""
+    auto_alpha: bool = True
+    """MAAC: tune the temperature towards ``target_entropy`` (SAC v2); False keeps ``alpha``."""
+    target_entropy: float = -2.0
+    """MAAC: target entropy per pursuer (nats; -2 = minus the action dimension)."""
+    lr_alpha: float = 1e-3
+    """MAAC: learning rate of the temperature."""
+    attend_reg: float = 1e-3
+    """MAAC: weight of the squared attention logits in the critic loss (as the original)."""
+
     # --- opponent (evader training) ---
     opponent: str = "pid-pf"
     """Pursuers the DDPG evader trains against (``pid-pf`` or ``random``)."""
@@ -118,6 +149,9 @@ class TrainConfig:
     """Minutes between checkpoints (one is also written at the end)."""
     checkpoint_buffer: bool = True
     """Save the replay buffer's contents in checkpoints (exact resumption)."""
+    snapshots: bool = False
+    """Also keep the policy of every log row as ``snapshots/ep<episodes>.pt`` (to choose an
+    opponent of a given strength afterwards, as the shipped evader was chosen)."""
     eval_episodes: int = 100
     """Episodes of the evaluation at the end of training (0 = none)."""
     tensorboard: bool = True
@@ -142,6 +176,9 @@ class TrainConfig:
             "update_every",
             "tp_update_every",
             "log_every",
+            "rollout_steps",
+            "ppo_epochs",
+            "attention_heads",
         )
         for name in positive:
             if getattr(self, name) < 1:
@@ -158,11 +195,24 @@ class TrainConfig:
             "checkpoint_every",
             "eval_episodes",
             "threads",
+            "ent_coef",
+            "target_kl",
+            "alpha",
+            "lr_alpha",
+            "attend_reg",
         ):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
         if not 0.0 <= self.gamma < 1.0:
             raise ConfigError(f"gamma must be in [0, 1), got {self.gamma}")
+        for name in ("gae_lambda", "clip_coef"):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise ConfigError(f"{name} must be in (0, 1], got {getattr(self, name)}")
+        if self.algo == "maac" and self.hidden % self.attention_heads:
+            raise ConfigError(
+                f"hidden ({self.hidden}) must be a multiple of attention_heads "
+                f"({self.attention_heads})"
+            )
         if not 0.0 < self.tau <= 1.0:
             raise ConfigError(f"tau must be in (0, 1], got {self.tau}")
         if not 0.0 < self.noise_decay <= 1.0:
@@ -285,6 +335,73 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
             env=dict(max_steps=100),
         ),
     },
+}
+# The baselines train with the quick CBC-TP preset's shaped reward and opponent, so that the
+# quick Table IV rows differ only by the learner (evaluations use the paper's reward).
+QUICK_ENV = dict(evader_policy="ddpg", self_weight=5.0, cooperation_weight=1.0)
+TINY = dict(
+    episodes=40,
+    num_envs=8,
+    hidden=32,
+    buffer_size=20_000,
+    batch_size=64,
+    update_every=8,
+    warmup=500,
+    log_every=10,
+    eval_episodes=20,
+    checkpoint_every=0.5,
+    env=dict(max_steps=100),
+)
+"""The shrunken settings of the tests, shared by the baselines' ``tiny`` presets."""
+PRESETS["ppo"] = {
+    # gamma, episodes and the minibatch from the paper (§V-A); the rest from the PPO paper
+    # (Schulman et al., 2017, MuJoCo settings), as the paper gives none for its baselines.
+    "paper": dict(
+        PAPER,
+        hidden=64,
+        lr_actor=3e-4,
+        lr_critic=3e-4,
+        rollout_steps=2048,
+        ppo_epochs=10,
+        gae_lambda=0.95,
+        clip_coef=0.2,
+    ),
+    # 64 environments x 64 steps per rollout, 4 minibatches, 10 epochs; ~1 s per update on
+    # one CPU thread, about as long as the rollout's collection.
+    "quick": dict(
+        episodes=7000,
+        num_envs=64,
+        hidden=64,
+        lr_actor=3e-4,
+        lr_critic=1e-3,
+        rollout_steps=64,
+        batch_size=1024,
+        ppo_epochs=10,
+        time_limit=60.0,
+        env=QUICK_ENV,
+    ),
+    "tiny": dict(TINY, rollout_steps=16, batch_size=32, ppo_epochs=4),
+}
+PRESETS["maac"] = {
+    # The paper's settings (§V-A) where they apply; MAAC's own 128 units and 4 heads.
+    "paper": dict(PAPER, hidden=128, attention_heads=4),
+    # One update per 64 transitions (two vector steps of 32 environments): an update of the
+    # two attention critics, the actors and alpha costs ~70 ms on one CPU thread.
+    "quick": dict(
+        episodes=1800,
+        num_envs=32,
+        hidden=64,
+        attention_heads=4,
+        lr_actor=5e-4,
+        lr_critic=1e-3,
+        buffer_size=300_000,
+        batch_size=256,
+        update_every=64,
+        warmup=10_000,
+        time_limit=60.0,
+        env=QUICK_ENV,
+    ),
+    "tiny": dict(TINY, attention_heads=2),
 }
 PRESETS["cbc"] = {name: dict(values, use_tp=False) for name, values in PRESETS["cbc-tp"].items()}
 

@@ -1,4 +1,5 @@
-"""The networks of CBC-TP Net (Fig. 3-4, Table II) and of the DDPG evader.
+"""The networks of CBC-TP Net (Fig. 3-4, Table II), of the DDPG evader, and the pieces the
+baselines share (a flat-observation MLP, per-agent or shared networks).
 
 Shapes use E or B for a batch, N pursuers, A = N + 1 vehicles, k predicted steps, n history
 steps. Positions are in arena units (metres / arena size), as in the observations.
@@ -190,3 +191,56 @@ class DeepSetCritic(DeepSetActor):
 
     def __init__(self, hidden: int = 128) -> None:
         super().__init__(hidden, action_dim=2)
+
+
+class FlatObsMLP(RowScaled):
+    """An MLP on one pursuer's whole observation, for the baselines built for a fixed swarm
+    size (PPO, MAAC): its N Table I rows, scaled as :class:`RowScaled`, each followed by its
+    real-row flag, flattened to 9N inputs, then ``layers`` hidden ReLU layers of ``hidden`` units
+    and a linear output. Masked (dead) rows are zero with a 0 flag.
+
+    The last layer starts within ±3e-3 (as DDPG's actor), so that an untrained policy's mean
+    action is near zero.
+    """
+
+    def __init__(
+        self,
+        num_pursuers: int,
+        hidden: int,
+        out_dim: int,
+        layers: int = 2,
+        obstacle_scale: float = 1.0,
+        target_scale: float = 1.0,
+    ) -> None:
+        super().__init__(0, obstacle_scale, target_scale)
+        self.num_pursuers = num_pursuers
+        self.body = mlp([9 * num_pursuers] + [hidden] * layers + [out_dim])
+        nn.init.uniform_(self.body[-1].weight, -3e-3, 3e-3)
+        nn.init.uniform_(self.body[-1].bias, -3e-3, 3e-3)
+
+    def forward(self, obs: Tensor, mask: Tensor) -> Tensor:
+        """obs (B, N, 8), mask (B, N) -> (B, out_dim)."""
+        cells = torch.cat([obs * self.scale, mask.unsqueeze(-1).to(obs.dtype)], dim=-1)
+        return self.body(cells.flatten(-2))
+
+
+class PerAgent(nn.Module):
+    """One network shared by all pursuers (``shared=True``) or one network per pursuer, applied
+    along dimension 1 of its inputs: every input is (B, N, ...), the output (B, N, ...).
+
+    ``make()`` builds one network; with sharing it is called once, otherwise N times.
+    """
+
+    def __init__(self, make, num_agents: int, shared: bool) -> None:
+        super().__init__()
+        self.nets = nn.ModuleList(make() for _ in range(1 if shared else num_agents))
+
+    def forward(self, *inputs: Tensor) -> Tensor:
+        """inputs each (B, N, ...) -> (B, N, ...)."""
+        if len(self.nets) == 1:
+            b, n = inputs[0].shape[:2]
+            out = self.nets[0](*(x.flatten(0, 1) for x in inputs))
+            return out.view(b, n, *out.shape[1:])
+        return torch.stack(
+            [net(*(x[:, i] for x in inputs)) for i, net in enumerate(self.nets)], dim=1
+        )

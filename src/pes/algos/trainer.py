@@ -1,5 +1,7 @@
-"""The training loop every off-policy learner shares: batched collection, updates, logging,
-checkpoints and resumption.
+"""The training loop every learner shares: batched collection, updates, logging, checkpoints
+and resumption. Off-policy learners update every ``update_every`` transitions once ``ready()``;
+on-policy ones (``on_policy = True``, PPO) are ``ready()`` when their rollout is full, and each
+``update()`` consumes it.
 
 A run lives in one folder::
 
@@ -64,6 +66,10 @@ LOG_COLUMNS = (
     "tp_loss",
     "tp_fde",
     "tp_ade",
+    "entropy",
+    "approx_kl",
+    "clip_frac",
+    "alpha",
     "env_steps_per_s",
     "updates_per_s",
 )
@@ -185,6 +191,7 @@ def train(
     learner_cls = ALGOS[cfg.algo]
     env_cfg = learner_cls.adapt_env(cfg.env_config())
     learner = learner_cls(cfg, env_cfg, device)
+    on_policy = getattr(learner, "on_policy", False)
     gen = torch.Generator().manual_seed(cfg.seed)
     prog = Progress()
     if resume:
@@ -195,7 +202,8 @@ def train(
             opt.load_state_dict(ckpt["optimizers"][name])
         if "buffer" in ckpt:
             learner.buffer.load_state_dict(ckpt["buffer"])
-        learner.noise.load_state_dict(ckpt["noise"])
+        if learner.noise is not None:
+            learner.noise.load_state_dict(ckpt["noise"])
         torch.set_rng_state(ckpt["rng"]["torch"])
         gen.set_state(ckpt["rng"]["sampler"])
         prog = Progress(**ckpt["progress"])
@@ -211,7 +219,7 @@ def train(
             "env_config": to_dict(env_cfg),
             "modules": {k: m.state_dict() for k, m in learner.modules().items()},
             "optimizers": {k: o.state_dict() for k, o in learner.optimizers().items()},
-            "noise": learner.noise.state_dict(),
+            "noise": learner.noise.state_dict() if learner.noise is not None else {},
             "rng": _rng_state(gen),
             "progress": vars(prog).copy(),
         }
@@ -298,7 +306,9 @@ def train(
             obs, info = obs2, info2
 
             if learner.ready():
-                prog.update_credit += cfg.num_envs / cfg.update_every
+                # Off-policy: one update per update_every transitions. On-policy: one update
+                # (all of its epochs) per full rollout.
+                prog.update_credit += 1.0 if on_policy else cfg.num_envs / cfg.update_every
                 while prog.update_credit >= 1.0:
                     for k, v in learner.update(gen).items():
                         stats_sum[k] = stats_sum.get(k, 0.0) + v
@@ -325,6 +335,9 @@ def train(
                 }
                 row.update({k: v / stats_count[k] for k, v in stats_sum.items()})
                 logger.write(row)
+                if cfg.snapshots:
+                    (out / "snapshots").mkdir(exist_ok=True)
+                    save_policy(out / "snapshots" / f"ep{prog.episodes:06d}.pt", meta())
                 score = learner.score(row["success_rate"], row["episode_steps"])
                 if score > prog.best_score:
                     prog.best_score = score

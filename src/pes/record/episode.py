@@ -20,7 +20,7 @@ import torch
 
 from pes.errors import CheckpointError
 from pes.sim.config import EnvConfig
-from pes.sim.env import PursuitEvasionEnv
+from pes.sim.env import PursuitEvasionEnv, make_env
 
 RECORD_VERSION = 1
 REQUIRED_KEYS = ("version", "config", "arena", "buildings", "dt", "agents", "frames", "outcome")
@@ -138,6 +138,34 @@ def make_record(
         "frames": frames,
         "outcome": dict(outcome, final_alive=last["alive"]),
     }
+
+
+def record_episode(policy, config: EnvConfig, seed: int = 0, device: str = "cpu") -> dict:
+    """Play one episode of the pursuer ``policy`` (a :class:`pes.policies.Policy`) in the
+    scenario ``config`` from the environment seed ``seed`` and return its record. Policies that
+    predict the evader's path (``last_prediction``, arena units) get it recorded in metres."""
+    env = make_env(config, num_envs=1, device=device, seed=seed)
+    obs, info = env.reset(seed=seed)
+    policy.reset(None)
+    recorder = EpisodeRecorder(env)
+    arena = torch.tensor([config.arena_width, config.arena_height], device=env.device)
+
+    def act():  # the actions, and the evader positions the policy predicts (m), if any
+        actions = policy(obs, info)
+        pred = getattr(policy, "last_prediction", None)
+        return actions, None if pred is None else pred[0] * arena
+
+    with torch.no_grad():
+        actions, pred = act()
+        recorder.start(pred)
+        while not recorder.finished:
+            obs, _, terminated, truncated, info = env.step(actions)
+            if bool(terminated[0] | truncated[0]):  # obs is already the next episode's
+                recorder.add(info)
+            else:
+                actions, pred = act()
+                recorder.add(info, pred)
+    return recorder.record()
 
 
 def save_record(record: dict[str, Any], path: str | Path) -> Path:

@@ -1,7 +1,8 @@
 """Top-down pictures of an episode record: buildings, vehicles, trails, the capture radius.
 
 Frames are drawn with Pillow straight from a record (see :mod:`pes.record.episode`), so that a
-GIF can be made from a run or from a saved JSON file alike.
+GIF or an MP4 (H.264, through imageio and the ffmpeg that the ``imageio-ffmpeg`` wheel bundles)
+can be made from a run or from a saved JSON file alike.
 """
 
 from __future__ import annotations
@@ -140,4 +141,46 @@ def save_gif(
         optimize=False,
         disposal=1,
     )
+    return path
+
+
+def save_mp4(
+    record: dict[str, Any],
+    path: str | Path,
+    fps: int = 20,
+    every: int = 1,
+    size: int = 600,
+    hold: float = 1.0,
+) -> Path:
+    """Write the episode as an H.264 MP4 (yuv420p, playable in browsers) at ``fps`` frames per
+    second: the frames of :func:`render_frames`, then the last one repeated for ``hold``
+    seconds. The picture is padded with white to even width and height, as H.264 needs."""
+    import imageio.v2 as imageio
+    import numpy as np
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = imageio.get_writer(
+        path,
+        format="FFMPEG",
+        mode="I",
+        fps=fps,
+        codec="libx264",
+        pixelformat="yuv420p",
+        macro_block_size=1,
+        quality=8,
+        ffmpeg_log_level="error",
+    )
+    try:
+        frame = None
+        for image in render_frames(record, size=size, every=every):
+            frame = np.asarray(image)
+            h, w = frame.shape[:2]
+            if h % 2 or w % 2:
+                frame = np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), constant_values=255)
+            writer.append_data(frame)
+        for _ in range(int(round(hold * fps))):
+            writer.append_data(frame)
+    finally:
+        writer.close()
     return path

@@ -1,0 +1,84 @@
+"""How a pursuer policy moves: speed, spread and distance to the evader over an episode.
+
+    python scripts/behaviour.py cbc-tp pid-pf --episodes 100
+
+Plays ``--episodes`` evaluation episodes (disturbance on, crashes disable, the shipped DDPG
+evader) per policy and prints, for steps 0-99, 100-299 and 300-499 of the episodes still
+running: the mean speed of the alive pursuers (m/s), their mean distance to the evader (m),
+the distance of the nearest one (m) and the mean distance of the pursuers from their own
+centroid (m, how spread out the swarm is).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from pes.cli import make_policy  # noqa: E402
+from pes.sim.config import EnvConfig  # noqa: E402
+from pes.sim.env import make_env  # noqa: E402
+
+WINDOWS = ((0, 100), (100, 300), (300, 500))
+
+
+def measure(name: str, episodes: int, seed: int) -> dict[str, list[float]]:
+    cfg = EnvConfig(disturbance=True, crash_mode="disable", evader_policy="ddpg")
+    env = make_env(cfg, num_envs=episodes, seed=seed)
+    policy = make_policy(name, cfg, seed=seed)
+    obs, info = env.reset(seed=seed)
+    running = torch.ones(episodes, dtype=torch.bool)
+    sums = {k: torch.zeros(len(WINDOWS)) for k in ("speed", "dist", "nearest", "spread")}
+    counts = torch.zeros(len(WINDOWS))
+    n = cfg.num_pursuers
+    with torch.no_grad():
+        for t in range(cfg.max_steps):
+            obs, _, terminated, truncated, info = env.step(policy(obs, info))
+            state = info["final_state"]  # (E, N+1, 8), normalised
+            alive = info["final_obs_mask"][:, :, 0] & running[:, None]
+            w = next(i for i, (a, b) in enumerate(WINDOWS) if a <= t < b)
+            pos = state[:, :n, :2] * cfg.arena_width
+            speed = state[:, :n, 2:4].norm(dim=-1) * cfg.pursuer_max_speed
+            dist = info["distances"]
+            a = alive.float()
+            k = a.sum(-1).clamp(min=1)
+            centroid = (pos * a[..., None]).sum(1) / k[:, None]
+            spread = ((pos - centroid[:, None]).norm(dim=-1) * a).sum(-1) / k
+            rows = running & alive.any(-1)
+            sums["speed"][w] += ((speed * a).sum(-1) / k)[rows].sum()
+            sums["dist"][w] += ((dist * a).sum(-1) / k)[rows].sum()
+            sums["nearest"][w] += dist.masked_fill(~alive, 1e9).min(-1).values[rows].sum()
+            sums["spread"][w] += spread[rows].sum()
+            counts[w] += rows.sum()
+            running &= ~(terminated | truncated)
+            if not running.any():
+                break
+    return {k: (v / counts.clamp(min=1)).tolist() for k, v in sums.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("policies", nargs="+")
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    print("| policy | steps | speed (m/s) | mean distance (m) | nearest (m) | spread (m) |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for name in args.policies:
+        stats = measure(name, args.episodes, args.seed)
+        for i, (a, b) in enumerate(WINDOWS):
+            print(
+                f"| {name} | {a}-{b - 1} | {stats['speed'][i]:.1f} | {stats['dist'][i]:.1f} "
+                f"| {stats['nearest'][i]:.1f} | {stats['spread'][i]:.1f} |",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()

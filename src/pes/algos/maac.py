@@ -1,0 +1,309 @@
+"""MAAC baseline (Table IV): the multi-actor attention critic (Iqbal & Sha, ICML 2019), adapted to
+continuous actions as a soft actor-critic (Haarnoja et al., 2018) with squashed Gaussian
+policies, off-policy on the shared replay storage.
+
+Critic (:class:`AttentionCritic`, MAAC's Fig. 1): every pursuer j has a state encoding
+e_j = g(s_j) and a state-action encoding f(s_j, a_j), where s_j is its global-state row (Table
+I self row), the evader's [position, velocity, obstacle vector] and an alive flag. Pursuer i's
+Q is ``head(e_i, x_i, a_i)``, with x_i the multi-head attention of its query (from e_i) over the
+keys and values of the *other alive* pursuers' state-action encodings. The original's critic
+outputs one Q per discrete action; with continuous actions the head takes a_i as an input
+instead. Encoders and heads are per pursuer with ``shared=False`` (as the original; the
+attention weights are always shared), one for all with ``shared=True`` (the default).
+
+One update (every ``update_every`` transitions after ``warmup``):
+
+1. critics (two, with target copies, as SAC v2; MAAC has one): y_i = r_i + gamma * (1 -
+   terminated) * alive'_i * (min_k Q'_k,i(s', a') - alpha * log pi(a'_i | o'_i)), a' sampled
+   from the current policies on s'; squared error masked to the pursuers alive in s, plus
+   ``attend_reg`` times the squared attention logits (as the original);
+2. actors: every alive pursuer samples a new action (reparameterised); pursuer i's loss is
+   alpha * log pi(a_i | o_i) - min_k Q_k,i(s, a), where the others' new actions enter Q_i
+   detached (they are MAAC's "current policies of the other agents"), so the gradient is
+   dQ_i/da_i only;
+3. the temperature alpha, towards ``target_entropy`` per pursuer (``auto_alpha``);
+4. soft target updates (``tau``).
+
+Dead pursuers: zero rows with a 0 flag everywhere, left out of the others' attention (a pursuer
+with no other alive pursuer attends to nothing: x_i = 0), and out of every loss.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from pes.algos.buffer import ReplayBuffer
+from pes.algos.common import (
+    ActorPolicy,
+    gaussian_log_prob,
+    masked_mean,
+    optimise,
+    pursuer_score,
+    soft_update,
+    target_copy,
+)
+from pes.algos.config import TrainConfig
+from pes.algos.features import pursuer_obs
+from pes.algos.nets import FlatObsMLP, PerAgent, RowScaled, mlp
+from pes.sim.config import EnvConfig
+
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+"""Range of the actors' log standard deviation (pre-tanh)."""
+
+
+class SquashedGaussianActor(nn.Module):
+    """The pursuers' policies: a = tanh(u), u ~ N(mean(o_i), std(o_i)), mean and log std from a
+    :class:`FlatObsMLP` on pursuer i's observation (one shared, or one per pursuer)."""
+
+    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+        super().__init__()
+        n = num_pursuers
+        self.nets = PerAgent(
+            lambda: FlatObsMLP(n, cfg.hidden, 4, 2, cfg.obstacle_scale, cfg.target_scale),
+            n,
+            cfg.shared,
+        )
+
+    def forward(self, obs: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
+        """obs (B, N, N, 8), mask (B, N, N) -> pre-tanh mean and log std, each (B, N, 2)."""
+        out = self.nets(obs, mask)
+        return out[..., :2], out[..., 2:].clamp(LOG_STD_MIN, LOG_STD_MAX)
+
+    def sample(self, obs: Tensor, mask: Tensor, gen: torch.Generator) -> tuple[Tensor, Tensor]:
+        """Reparameterised actions (B, N, 2) in (-1, 1) and their log-probabilities (B, N)."""
+        mean, log_std = self(obs, mask)
+        eps = torch.randn(mean.shape, generator=gen).to(mean.device)
+        u = mean + eps * log_std.exp()
+        # log pi(a) = log N(u) - sum log(1 - tanh(u)^2), written stably
+        correction = 2.0 * (math.log(2.0) - u - nn.functional.softplus(-2.0 * u))
+        return torch.tanh(u), gaussian_log_prob(u, mean, log_std) - correction.sum(-1)
+
+    def mean_action(self, obs: Tensor, mask: Tensor) -> Tensor:
+        """(B, N, 2) deterministic actions: tanh of the mean."""
+        return torch.tanh(self(obs, mask)[0])
+
+
+class AttentionCritic(RowScaled):
+    """MAAC's attention critic for continuous actions: Q_i(s, a) of every pursuer in one pass.
+
+    Rows are scaled as the CBC networks' (:class:`RowScaled`)."""
+
+    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
+        h, n = cfg.hidden, num_pursuers
+        self.heads = cfg.attention_heads
+        row = 8 + 6 + 1  # own state row, the evader's, alive flag
+
+        def encoder(inputs: int):
+            return lambda: nn.Sequential(nn.Linear(inputs, h), nn.LeakyReLU())
+
+        self.state_encoder = PerAgent(encoder(row), n, cfg.shared)
+        self.state_action_encoder = PerAgent(encoder(row + 2), n, cfg.shared)
+        self.query = nn.Linear(h, h, bias=False)
+        self.key = nn.Linear(h, h, bias=False)
+        self.value = nn.Sequential(nn.Linear(h, h), nn.LeakyReLU())
+        self.head = PerAgent(lambda: mlp([2 * h + 2, h, 1]), n, cfg.shared)
+
+    def forward(
+        self, state: Tensor, alive: Tensor, actions: Tensor, own_actions: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """Q of every pursuer.
+
+        Args:
+            state: (B, A, 8) global states; alive: (B, N) bool.
+            actions: (B, N, 2) the actions the other pursuers' keys and values see.
+            own_actions: (B, N, 2) the action each pursuer's own head sees (default
+                ``actions``); the actor update passes its new actions here and their detached
+                copy as ``actions``.
+
+        Returns:
+            Q (B, N) and the squared attention logits averaged over the attended pairs (a
+            scalar, for the regulariser).
+        """
+        b, n = alive.shape
+        flag = alive.unsqueeze(-1).to(state.dtype)
+        scaled = state * self.scale
+        rows = torch.cat([scaled[:, :n], scaled[:, -1:, :6].expand(-1, n, -1), flag], dim=-1)
+        rows = rows * flag
+        own = actions if own_actions is None else own_actions
+        enc = self.state_encoder(rows)  # (B, N, h)
+        sa = self.state_action_encoder(torch.cat([rows, actions * flag], dim=-1))
+        d = enc.shape[-1] // self.heads
+
+        def split(x: Tensor) -> Tensor:  # (B, N, h) -> (B, H, N, d)
+            return x.view(b, n, self.heads, d).transpose(1, 2)
+
+        q, k, v = split(self.query(enc)), split(self.key(sa)), split(self.value(sa))
+        logits = q @ k.transpose(-1, -2) / math.sqrt(d)  # (B, H, N, N)
+        others = ~torch.eye(n, dtype=torch.bool, device=state.device)
+        allowed = (alive.unsqueeze(1) & others).unsqueeze(1)  # (B, 1, N, N): key j for query i
+        weights = torch.softmax(logits.masked_fill(~allowed, -1e9), dim=-1) * allowed
+        attended = (weights @ v).transpose(1, 2).reshape(b, n, -1)
+        value = self.head(torch.cat([enc, attended, own * flag], dim=-1)).squeeze(-1)
+        reg = masked_mean(logits**2, allowed.expand_as(logits))
+        return value, reg
+
+
+class Temperature(nn.Module):
+    """The entropy temperature alpha, kept as its logarithm."""
+
+    def __init__(self, alpha: float) -> None:
+        super().__init__()
+        self.log_alpha = nn.Parameter(torch.tensor(math.log(max(alpha, 1e-8))))
+
+    def forward(self) -> Tensor:
+        return self.log_alpha.exp()
+
+
+class MAAC:
+    """The MAAC learner (soft actor-critic with attention critics)."""
+
+    name = "maac"
+
+    def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
+        self.cfg = cfg
+        self.n = n = env_cfg.num_pursuers
+        self.device = device
+        self.actor = SquashedGaussianActor(cfg, n).to(device)
+        self.critics = nn.ModuleList(AttentionCritic(cfg, n) for _ in range(2)).to(device)
+        self.critics_target = target_copy(self.critics)
+        self.temperature = Temperature(cfg.alpha).to(device)
+        self.policy = ActorPolicy(self.actor)
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
+        self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=cfg.lr_critic)
+        self.opt_alpha = torch.optim.Adam(self.temperature.parameters(), lr=cfg.lr_alpha)
+        self.buffer = ReplayBuffer(
+            cfg.buffer_size,
+            cfg.num_envs,
+            {
+                "state": ((n + 1, 8), torch.float32),
+                "alive": ((n,), torch.bool),
+                "action": ((n, 2), torch.float32),
+                "reward": ((n,), torch.float32),
+                "next_state": ((n + 1, 8), torch.float32),
+                "next_alive": ((n,), torch.bool),
+                "terminated": ((), torch.bool),
+            },
+            device,
+        )
+        self.noise = None  # exploration is the policy's own sampling
+        self.updates = 0
+
+    @staticmethod
+    def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
+        """The training scenario (unchanged: the configured evader plays)."""
+        return env_cfg
+
+    # --- acting ----------------------------------------------------------------------------------
+    @torch.no_grad()
+    def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
+        """(E, N, 2) actions sampled from the policies (``noise_scale`` is unused: SAC explores
+        by sampling), and no evader actions."""
+        return self.actor.sample(obs, info["obs_mask"], gen)[0], None
+
+    def record(self, before, actions, evader_actions, reward, terminated, after) -> None:
+        """Store one vector step: ``before``/``after`` are the infos around ``env.step``."""
+        self.buffer.add(
+            state=before["state"],
+            alive=before["obs_mask"][:, :, 0],
+            action=actions,
+            reward=reward,
+            next_state=after["final_state"],
+            next_alive=after["final_obs_mask"][:, :, 0],
+            terminated=terminated,
+            ep_step=(after["steps"] - 1).to(torch.int32),
+        )
+
+    def episode_reset(self, done: Tensor) -> None:
+        """Stateless between episodes."""
+
+    # --- learning --------------------------------------------------------------------------------
+    def ready(self) -> bool:
+        return len(self.buffer) >= max(self.cfg.warmup, self.cfg.batch_size)
+
+    def update(self, gen: torch.Generator) -> dict[str, float]:
+        """One update of the critics, the actors and the temperature; returns their metrics."""
+        cfg, buf = self.cfg, self.buffer
+        row, env = buf.sample_index(cfg.batch_size, gen)
+        state, alive = buf.get("state", row, env), buf.get("alive", row, env)
+        next_state, next_alive = buf.get("next_state", row, env), buf.get("next_alive", row, env)
+        action, reward = buf.get("action", row, env), buf.get("reward", row, env)
+        terminated = buf.get("terminated", row, env)
+        alpha = self.temperature().detach()
+
+        with torch.no_grad():
+            next_obs, next_mask = pursuer_obs(next_state, next_alive)
+            next_action, next_logp = self.actor.sample(next_obs, next_mask, gen)
+            q_next = torch.min(
+                *(c(next_state, next_alive, next_action)[0] for c in self.critics_target)
+            )
+            keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
+            y = reward + cfg.gamma * keep * (q_next - alpha * next_logp)
+        critic_loss = torch.zeros((), device=state.device)
+        for critic in self.critics:
+            q, reg = critic(state, alive, action)
+            critic_loss = critic_loss + masked_mean((q - y) ** 2, alive) + cfg.attend_reg * reg
+        optimise(self.opt_critic, critic_loss, self.critics.parameters(), cfg.grad_clip)
+
+        obs, mask = pursuer_obs(state, alive)
+        new_action, logp = self.actor.sample(obs, mask, gen)
+        self.critics.requires_grad_(False)
+        q_pi = torch.min(
+            *(c(state, alive, new_action.detach(), new_action)[0] for c in self.critics)
+        )
+        self.critics.requires_grad_(True)
+        actor_loss = masked_mean(alpha * logp - q_pi, alive)
+        optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
+
+        if cfg.auto_alpha:
+            entropy_gap = (logp.detach() + cfg.target_entropy) * alive.float()
+            alpha_loss = -(self.temperature.log_alpha * entropy_gap).sum() / alive.sum().clamp(
+                min=1
+            )
+            optimise(self.opt_alpha, alpha_loss, self.temperature.parameters(), 0.0)
+        soft_update(self.critics_target, self.critics, cfg.tau)
+        self.updates += 1
+        with torch.no_grad():
+            std = self.actor(obs, mask)[1].exp().mean(-1)
+        return {
+            "critic_loss": float(critic_loss.detach()),
+            "actor_loss": float(actor_loss.detach()),
+            "q_mean": float(masked_mean(q_pi.detach(), alive)),
+            "entropy": float(-masked_mean(logp.detach(), alive)),
+            "alpha": float(alpha),
+            "noise": float(masked_mean(std, alive)),
+        }
+
+    score = staticmethod(pursuer_score)
+
+    # --- saving ----------------------------------------------------------------------------------
+    def modules(self) -> dict[str, nn.Module]:
+        return {
+            "actor": self.actor,
+            "critics": self.critics,
+            "critics_target": self.critics_target,
+            "temperature": self.temperature,
+        }
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        return {"actor": self.opt_actor, "critic": self.opt_critic, "alpha": self.opt_alpha}
+
+    def policy_modules(self) -> dict[str, nn.Module]:
+        """What a deployed policy needs: the actors."""
+        return {"actor": self.actor}
+
+    @staticmethod
+    def fixed_swarm(cfg: TrainConfig) -> str | None:
+        """Why a trained policy only serves the swarm size it was trained on."""
+        return "has MLPs whose inputs are sized"
+
+    @staticmethod
+    def build_policy(cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[ActorPolicy, dict]:
+        """An untrained policy of this architecture, and its modules by name (to load into).
+        The flat-observation actors serve only the swarm size they were trained for
+        (:func:`pes.algos.policy.load_pursuer_policy` checks it, see ``fixed_swarm``)."""
+        actor = SquashedGaussianActor(cfg, env_cfg.num_pursuers).to(device)
+        return ActorPolicy(actor), {"actor": actor}

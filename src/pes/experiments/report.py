@@ -1,0 +1,371 @@
+"""The report of a reproduction: Markdown tables beside the paper's numbers, PNG figures with
+captions, and each trial's CSV log, from the finished trials of an output folder.
+
+Files (in the output folder): ``table4.md``, ``table5.md``, ``table6.md``, ``figures.md`` (the
+captions) with ``figures/*.png``, ``logs/<trial>.csv`` (each training run's progress log),
+``evals.json`` (every evaluation's figures) and ``reproduce.json`` (settings, hardware, times).
+Mean ± std is over seeds (the sample standard deviation; a single seed shows its value alone).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pes.experiments.paper import LABELS, TABLE4, TABLE5, TABLE6
+from pes.experiments.trials import BUDGETS, DAMAGED, EVAL_SEED, eval_config, write_json
+
+
+def _load(out: Path, specs: list[dict]) -> dict[str, dict]:
+    done = {}
+    for spec in specs:
+        path = out / "trials" / spec["id"] / "done.json"
+        if path.is_file():
+            done[spec["id"]] = json.loads(path.read_text())
+    return done
+
+
+def _stats(values: list[float]) -> tuple[float, float]:
+    arr = np.asarray(values, dtype=float)
+    return float(arr.mean()), float(arr.std(ddof=1)) if len(arr) > 1 else 0.0
+
+
+def _fmt(values: list[float], scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
+    if not values:
+        return "—"
+    mean, std = _stats([v * scale for v in values])
+    if len(values) == 1:  # one seed: no spread to show
+        return f"{mean:.{digits}f}{unit}"
+    return f"{mean:.{digits}f} ± {std:.{digits}f}{unit}"
+
+
+def _paper(value: float | None, scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
+    return "—" if value is None else f"{value * scale:.{digits}f}{unit}"
+
+
+def _by_method(specs: list[dict], done: dict, kind: str = "table4") -> dict[str, list[dict]]:
+    out: dict[str, list[dict]] = {}
+    for spec in specs:
+        rec = done.get(spec["id"])
+        if rec is not None and "evals" in rec and kind in rec["evals"]:
+            out.setdefault(spec["algo"], []).append(rec["evals"][kind])
+    return out
+
+
+def _header(title: str, meta: dict) -> list[str]:
+    return [
+        f"# {title}",
+        "",
+        f"Budget `{meta['budget']}`, {meta['seeds']} seed(s); each evaluation "
+        f"{meta['eval_episodes']} episodes with disturbance, crashes disable, against the "
+        f"{meta['evader']} evader. Mean ± std over seeds. Made by `{meta['command']}` "
+        f"({meta['hardware']}).",
+        "",
+    ]
+
+
+def table4(specs: list[dict], done: dict, meta: dict) -> str | None:
+    rows = _by_method(specs, done)
+    methods = [m for m in LABELS if m in rows]
+    if not methods:
+        return None
+    lines = _header("Table IV: every method against the DDPG evader", meta)
+    lines += [
+        "| | " + " | ".join(LABELS[m] for m in methods) + " |",
+        "| --- |" + " --- |" * len(methods),
+    ]
+    metrics = (
+        ("success rate", "success_rate", 100.0, 1, " %"),
+        ("episode steps", "mean_steps", 1.0, 0, ""),
+        ("average reward", "mean_reward", 1.0, 3, ""),
+    )
+    for label, key, scale, digits, unit in metrics:
+        ours = [_fmt([r[key] for r in rows[m]], scale, digits, unit) for m in methods]
+        paper = [_paper(TABLE4[m][key], scale, digits, unit) for m in methods]
+        lines.append(f"| {label} (PES) | " + " | ".join(ours) + " |")
+        lines.append(f"| {label} (paper) | " + " | ".join(paper) + " |")
+    lines += [
+        "",
+        "Seeds per method: " + ", ".join(f"{LABELS[m]} {len(rows[m])}" for m in methods) + ".",
+        "CBC Net (the ablation of §V-C) is not in the paper's Table IV.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def table5(specs: list[dict], done: dict, meta: dict) -> str | None:
+    recs = [done[s["id"]]["table5"] for s in specs if s["kind"] == "tpnet" and s["id"] in done]
+    if not recs:
+        return None
+    lines = _header("Table V: TP Net's prediction error", meta)
+    lines[2] = (
+        f"Budget `{meta['budget']}`, {len(recs)} seed(s): TP Net (horizon 5) trained on "
+        f"{recs[0]['train_windows']} windows of {recs[0]['pursuers']} pursuers against the "
+        f"{meta['evader']} evader, measured on {recs[0]['test_windows']} held-out windows. "
+        "Errors in arena units (metres / arena side); see pes.experiments.tpnet. "
+        f"Made by `{meta['command']}` ({meta['hardware']})."
+    )
+    lines += ["| | k = 1 | k = 2 | k = 3 | k = 4 | k = 5 |", "| --- |" + " --- |" * 5]
+    for key in ("fde", "ade"):
+        ours = [_fmt([r[key][k] for r in recs], digits=4) for k in range(5)]
+        const = [_fmt([r["constant_position"][key][k] for r in recs], digits=4) for k in range(5)]
+        lines.append(f"| {key.upper()} (PES) | " + " | ".join(ours) + " |")
+        lines.append(f"| {key.upper()} (paper) | " + " | ".join(f"{v:.3f}" for v in TABLE5[key]))
+        lines[-1] += " |"
+        lines.append(f"| {key.upper()} (evader stays put) | " + " | ".join(const) + " |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+def table6(specs: list[dict], done: dict, meta: dict) -> str | None:
+    settings = {0: "table4", **{k: f"damaged{k}" for k in DAMAGED}}
+    rows = {k: _by_method(specs, done, name).get("cbc-tp", []) for k, name in settings.items()}
+    if not rows[0]:
+        return None
+    lines = _header("Table VI: CBC-TP Net with damaged pursuers", meta)
+    lines += [
+        "| pursuers damaged | success rate (PES) | success rate (paper) | episode steps (PES) "
+        "| episode steps (paper) |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for k, recs in rows.items():
+        lines.append(
+            f"| {k} | {_fmt([r['success_rate'] for r in recs], 100.0, 1, ' %')} "
+            f"| {100 * TABLE6[k][0]:.1f} % | {_fmt([r['mean_steps'] for r in recs], digits=0)} "
+            f"| {TABLE6[k][1]} |"
+        )
+    lines.append("")
+    return "\n".join(lines)
+
+
+# --- figures ---------------------------------------------------------------------------------
+
+
+def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarray]]:
+    """Method -> each seed's progress log as a structured array."""
+    curves: dict[str, list] = {}
+    for spec in specs:
+        log = out / "trials" / spec["id"] / "run" / "progress.csv"
+        if spec["kind"] == "train" and spec["id"] in done and log.is_file():
+            data = np.genfromtxt(log, delimiter=",", names=True)
+            curves.setdefault(spec["algo"], []).append(np.atleast_1d(data))
+    return curves
+
+
+def _band(ax, runs: list[np.ndarray], key: str, label: str, scale: float = 1.0) -> None:
+    grid = np.unique(np.concatenate([r["episodes"] for r in runs]))
+    ys = np.stack([np.interp(grid, r["episodes"], r[key] * scale) for r in runs])
+    mean = ys.mean(0)
+    (line,) = ax.plot(grid, mean, label=f"{label} ({len(runs)} seeds)")
+    if len(runs) > 1:
+        std = ys.std(0, ddof=1)
+        ax.fill_between(grid, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+
+
+def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[str, str]]:
+    """Write the PNG figures; returns (file, caption) pairs."""
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    folder = out / "figures"
+    folder.mkdir(exist_ok=True)
+    made: list[tuple[str, str]] = []
+    curves = _curves(out, specs, done)
+    training = (
+        "training episodes (exploration noise on, crashes continue, no disturbance, the "
+        "training reward of each method's preset), mean ± std over seeds, one point per log row"
+    )
+    panels = (
+        ("fig6_success_rate.png", "success_rate", "success rate (%)", 100.0, "Fig. 6"),
+        ("fig7_average_reward.png", "avg_reward", "average reward", 1.0, "Fig. 7"),
+        ("fig8_episode_steps.png", "episode_steps", "episode steps", 1.0, "Fig. 8"),
+    )
+    for name, key, ylabel, scale, paper_fig in panels:
+        if not curves:
+            break
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        for method in LABELS:
+            if method in curves:
+                _band(ax, curves[method], key, LABELS[method], scale)
+        ax.set_xlabel("episodes")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(folder / name, dpi=120)
+        plt.close(fig)
+        made.append((name, f"{paper_fig}: {ylabel} of every learned method over {training}."))
+
+    if "cbc" in curves and "cbc-tp" in curves:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+        for ax, (key, ylabel, scale) in zip(
+            axes, (("success_rate", "success rate (%)", 100.0), ("avg_reward", "average reward", 1))
+        ):
+            for method in ("cbc", "cbc-tp"):
+                _band(ax, curves[method], key, LABELS[method], scale)
+            ax.set_xlabel("episodes")
+            ax.set_ylabel(ylabel)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(folder / "fig9_10_cbc_tp_vs_cbc.png", dpi=120)
+        plt.close(fig)
+        made.append(
+            (
+                "fig9_10_cbc_tp_vs_cbc.png",
+                "Figs. 9-10: success rate and average reward of CBC-TP Net and CBC Net over "
+                f"{training}.",
+            )
+        )
+    made += _trajectory_figures(out, specs, done, meta, folder, plt)
+    return made
+
+
+def _seed0(specs: list[dict], done: dict, algo: str) -> Path | None:
+    """The policy file (relative to the output folder) of ``algo``'s first finished seed."""
+    for spec in specs:
+        if spec["algo"] == algo and spec["id"] in done:
+            return Path("trials") / spec["id"] / "run" / "policy.pt"
+    return None
+
+
+def _trajectory_figures(out, specs, done, meta, folder, plt) -> list[tuple[str, str]]:
+    from pes.algos.policy import load_pursuer_policy  # noqa: PLC0415
+    from pes.record import plot_trajectories, record_episode  # noqa: PLC0415
+
+    budget = BUDGETS[meta["budget"]]
+    seed = EVAL_SEED
+    made = []
+
+    def episode(algo: str, damaged: int):
+        cfg = eval_config(budget, damaged)
+        policy = load_pursuer_policy(out / _seed0(specs, done, algo), cfg)[0]
+        return record_episode(policy, cfg, seed=seed)
+
+    if _seed0(specs, done, "cbc-tp") and _seed0(specs, done, "cbc"):
+        fig, axes = plt.subplots(1, 2, figsize=(12, 6))
+        plot_trajectories(episode("cbc-tp", 0), axes[0], title="CBC-TP Net (with TP Net)")
+        plot_trajectories(episode("cbc", 0), axes[1], title="CBC Net (without TP Net)")
+        fig.tight_layout()
+        fig.savefig(folder / "fig11_trajectories_tp.png", dpi=110)
+        plt.close(fig)
+        made.append(
+            (
+                "fig11_trajectories_tp.png",
+                "Fig. 11: one evaluation episode (the same start, seed "
+                f"{seed}) played by CBC-TP Net (left; thin lines: TP Net's predicted evader path) "
+                "and CBC Net (right), seed-0 policies, against the DDPG evader.",
+            )
+        )
+    if _seed0(specs, done, "cbc-tp"):
+        fig, axes = plt.subplots(1, len(DAMAGED), figsize=(6 * len(DAMAGED), 6))
+        for ax, k in zip(np.atleast_1d(axes), DAMAGED):
+            plot_trajectories(episode("cbc-tp", k), ax, title=f"CBC-TP Net, {k} damaged")
+        fig.tight_layout()
+        fig.savefig(folder / "fig12_trajectories_damaged.png", dpi=110)
+        plt.close(fig)
+        made.append(
+            (
+                "fig12_trajectories_damaged.png",
+                f"Fig. 12: CBC-TP Net (seed-0 policy) with {' and '.join(map(str, DAMAGED))} "
+                "pursuers damaged at the start (grey crosses), one evaluation episode each.",
+            )
+        )
+        steps = {}
+        for k, name in ((0, "table4"), *((k, f"damaged{k}") for k in DAMAGED)):
+            steps[k] = []
+            for spec in specs:
+                path = out / "trials" / spec["id"] / f"eval_{name}.json"
+                if spec["algo"] == "cbc-tp" and path.is_file():
+                    steps[k] += json.loads(path.read_text())["per_episode"]["steps"]
+        fig, ax = plt.subplots(figsize=(6, 4.5))
+        ax.boxplot([steps[k] for k in steps], showmeans=True)
+        ax.set_xticks(range(1, len(steps) + 1), [f"{k} damaged" for k in steps])
+        ax.set_ylabel("episode steps")
+        ax.grid(alpha=0.3, axis="y")
+        fig.tight_layout()
+        fig.savefig(folder / "fig13_damaged_steps.png", dpi=120)
+        plt.close(fig)
+        made.append(
+            (
+                "fig13_damaged_steps.png",
+                "Fig. 13: episode steps of CBC-TP Net with 0 / 1 / 2 pursuers damaged, every "
+                "evaluation episode of every seed (failures count at the step limit; triangles: "
+                "means).",
+            )
+        )
+    return made
+
+
+def write_report(
+    out: Path,
+    specs: list[dict],
+    target: str,
+    budget: str,
+    seeds: int,
+    command: str,
+    seconds: float,
+) -> list[str]:
+    """Write every table and figure the finished trials allow; returns the files written."""
+    from pes.sim.bench import machine_info  # noqa: PLC0415
+
+    done = _load(out, specs)
+    machine = machine_info()
+    cfg = eval_config(BUDGETS[budget])
+    meta = {
+        "budget": budget,
+        "seeds": seeds,
+        "eval_episodes": BUDGETS[budget].eval_episodes,
+        "evader": "shipped DDPG" if cfg.evader_policy == "ddpg" else cfg.evader_policy,
+        "command": command or f"pes reproduce {target} --budget {budget} --seeds {seeds}",
+        "hardware": f"{machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']}",
+    }
+    written = []
+    tables = {"table4": table4, "table5": table5, "table6": table6}
+    for name, fn in tables.items():
+        if target in (name, "all") or (target == "figures" and name == "table4"):
+            text = fn(specs, done, meta)
+            if text is not None:
+                (out / f"{name}.md").write_text(text)
+                written.append(f"{name}.md")
+    if target in ("figures", "all"):
+        made = figures(out, specs, done, meta)
+        lines = ["# Figures", "", f"Made by `{meta['command']}` ({meta['hardware']}).", ""]
+        for name, caption in made:
+            lines += [f"## {name}", "", f"![{name}](figures/{name})", "", caption, ""]
+        (out / "figures.md").write_text("\n".join(lines))
+        written += ["figures.md", *(f"figures/{n}" for n, _ in made)]
+
+    logs = out / "logs"
+    evals: dict[str, Any] = {}
+    for spec in specs:
+        if spec["id"] not in done:
+            continue
+        src = out / "trials" / spec["id"] / "run" / "progress.csv"
+        if src.is_file():
+            logs.mkdir(exist_ok=True)
+            shutil.copyfile(src, logs / f"{spec['id']}.csv")
+        rec = done[spec["id"]]
+        evals[spec["id"]] = {k: rec.get(k) for k in ("evals", "table5", "train")}
+    write_json(out / "evals.json", evals)
+    write_json(
+        out / "reproduce.json",
+        {
+            **meta,
+            "target": target,
+            "trials": [s["id"] for s in specs],
+            "finished": sorted(done),
+            "seconds_this_invocation": round(seconds, 1),
+            "training_seconds": {
+                k: v["train"]["wall_s"] for k, v in evals.items() if v.get("train")
+            },
+            "machine": machine,
+        },
+    )
+    return written + ["evals.json", "reproduce.json"]

@@ -1,0 +1,117 @@
+"""`pes reproduce` end to end on the tiny budget, with and without Ray, and its resumption."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from pes.cli import main
+from pes.experiments.reproduce import reproduce
+from pes.experiments.trials import make_trials
+
+METHODS = ["pid-pf", "cbc", "cbc-tp"]
+
+
+def _not_blank(path) -> bool:
+    pixels = np.asarray(Image.open(path).convert("RGB"), dtype=float)
+    return pixels.std() > 5.0
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    """One sequential run of every target (1 seed, 3 methods) and its summary."""
+    out = tmp_path_factory.mktemp("reproduce")
+    summary = reproduce("all", budget="tiny", seeds=1, out=out, methods=METHODS, use_ray=False)
+    return out, summary
+
+
+@pytest.mark.slow
+def test_all_targets_sequential(sweep):
+    out, summary = sweep
+    assert summary["runner"] == "sequential"
+    assert summary["ran"] == summary["trials"] == 4  # 3 methods + the TP Net trial
+    table4 = (out / "table4.md").read_text()
+    for label in ("PID(PF)", "CBC Net", "CBC-TP Net", "success rate (paper)", "27.3 %"):
+        assert label in table4
+    table5 = (out / "table5.md").read_text()
+    assert "FDE (PES)" in table5 and "0.196" in table5
+    table6 = (out / "table6.md").read_text()
+    assert "| 2 |" in table6 and "86.7 %" in table6
+    figures = sorted(p.name for p in (out / "figures").glob("*.png"))
+    assert figures == [
+        "fig11_trajectories_tp.png",
+        "fig12_trajectories_damaged.png",
+        "fig13_damaged_steps.png",
+        "fig6_success_rate.png",
+        "fig7_average_reward.png",
+        "fig8_episode_steps.png",
+        "fig9_10_cbc_tp_vs_cbc.png",
+    ]
+    assert all(_not_blank(out / "figures" / name) for name in figures)
+    captions = (out / "figures.md").read_text()
+    assert captions.count("![") == len(figures)
+    assert sorted(p.name for p in (out / "logs").glob("*.csv")) == ["cbc-s0.csv", "cbc-tp-s0.csv"]
+    evals = json.loads((out / "evals.json").read_text())
+    assert set(evals["cbc-tp-s0"]["evals"]) == {"table4", "damaged1", "damaged2"}
+    table5_rec = evals["tpnet-s0"]["table5"]
+    assert len(table5_rec["fde"]) == len(table5_rec["ade"]) == 5
+    meta = json.loads((out / "reproduce.json").read_text())
+    assert meta["machine"]["cpu_count"] >= 1 and set(meta["finished"]) == {
+        s["id"] for s in make_trials(METHODS, 1, "tiny", tpnet=True)
+    }
+
+
+@pytest.mark.slow
+def test_rerun_skips_finished_trials(sweep):
+    out, _ = sweep
+    done = {p: p.stat().st_mtime_ns for p in (out / "trials").glob("*/done.json")}
+    summary = reproduce("all", budget="tiny", seeds=1, out=out, methods=METHODS, use_ray=False)
+    assert summary["ran"] == 0 and summary["skipped"] == 4
+    assert {p: p.stat().st_mtime_ns for p in done} == done
+
+
+@pytest.mark.slow
+def test_report_only_runs_nothing(sweep, tmp_path):
+    out, _ = sweep
+    (out / "table4.md").unlink()
+    summary = reproduce(
+        "table4", budget="tiny", seeds=2, out=out, methods=METHODS, use_ray=False, report_only=True
+    )
+    assert summary["ran"] == 0 and summary["skipped"] == 3 and summary["unfinished"] == 3
+    assert "Seeds per method: PID(PF) 1" in (out / "table4.md").read_text()
+    assert not (out / "trials" / "cbc-s1").exists()
+
+
+@pytest.mark.slow
+def test_interrupted_trial_resumes_without_retraining(sweep):
+    out, _ = sweep
+    trial = out / "trials" / "cbc-s0"
+    policy_time = (trial / "run" / "policy.pt").stat().st_mtime_ns
+    (trial / "done.json").unlink()  # as if killed after training, during its evaluations
+    (trial / "eval_table4.json").unlink()
+    summary = reproduce("table4", budget="tiny", seeds=1, out=out, methods=METHODS, use_ray=False)
+    assert summary["ran"] == 1 and summary["skipped"] == 2
+    assert (trial / "done.json").is_file() and (trial / "eval_table4.json").is_file()
+    assert (trial / "run" / "policy.pt").stat().st_mtime_ns == policy_time
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is not installed")
+def test_table6_with_ray(tmp_path):
+    summary = reproduce("table6", budget="tiny", seeds=1, out=tmp_path, use_ray=True)
+    assert summary["runner"] == "ray" and summary["ran"] == 1
+    assert "CBC-TP Net with damaged pursuers" in (tmp_path / "table6.md").read_text()
+    assert json.loads((tmp_path / "trials" / "cbc-tp-s0" / "done.json").read_text())["evals"]
+
+
+def test_user_mistakes(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["reproduce", "table9"])
+    assert exc.value.code == 2
+    argv = ["reproduce", "table4", "--budget", "tiny", "--out", str(tmp_path), "--no-ray"]
+    assert main([*argv, "--methods", "nope"]) == 2
+    assert "unknown method 'nope'" in capsys.readouterr().err
