@@ -339,7 +339,9 @@ def train(
                     (out / "snapshots").mkdir(exist_ok=True)
                     save_policy(out / "snapshots" / f"ep{prog.episodes:06d}.pt", meta())
                 score = learner.score(row["success_rate"], row["episode_steps"])
-                if score > prog.best_score:
+                # Ties go to the later row: a run that never captures keeps its latest policy,
+                # not its first, barely trained one.
+                if score >= prog.best_score:
                     prog.best_score = score
                     save_policy(out / "best_policy.pt", {**meta(), "best_at": prog.episodes})
                 bar.set_postfix(
