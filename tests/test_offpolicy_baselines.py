@@ -25,6 +25,14 @@ FAST = dict(compile_env=False, tensorboard=False)
 BASELINES = ("maddpg", "ddpg", "bicnet")
 
 
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """One thread, as the training runs: on a busy 2-core machine a two-thread batched matrix
+    product of these small networks waits ~8 ms on the other core (400x a one-thread one)."""
+    torch.set_num_threads(1)
+    yield
+
+
 def _state(n: int, num_envs: int = 6, damaged: int = 0, seed: int = 0):
     cfg = pes.EnvConfig(num_pursuers=n, capture_count=min(3, n), damaged=damaged)
     env = pes.make_env(cfg.replace(crash_mode="disable"), num_envs=num_envs, seed=seed)
@@ -168,10 +176,9 @@ def test_trains_resumes_and_evaluates(algo, tmp_path, capsys):
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", BASELINES)
 def test_learns_on_a_tiny_budget(algo, tmp_path):
-    """Fixed seed, 30-55 s each: CBC-TP's identity-style task (tests/test_learners.py): one
+    """Fixed seed, 15-30 s each: CBC-TP's identity-style task (tests/test_learners.py): one
     pursuer within 5 m of a randomly moving evader for two steps captures it, 100-step episodes,
     no buildings. The untrained swarm hovers and never captures; the trained one must."""
-    torch.set_num_threads(1)
     env = dict(
         max_steps=100,
         num_pursuers=3,
