@@ -11,7 +11,7 @@ from PIL import Image
 
 from pes.cli import main
 from pes.experiments.reproduce import reproduce
-from pes.experiments.trials import make_trials
+from pes.experiments.trials import BUDGETS, make_trials, train_config
 
 METHODS = ["pid-pf", "cbc", "cbc-tp"]
 
@@ -106,6 +106,20 @@ def test_table6_with_ray(tmp_path):
     assert summary["runner"] == "ray" and summary["ran"] == 1
     assert "CBC-TP Net with damaged pursuers" in (tmp_path / "table6.md").read_text()
     assert json.loads((tmp_path / "trials" / "cbc-tp-s0" / "done.json").read_text())["evals"]
+
+
+def test_budget_training_configs():
+    """quick trains each method on a fifth of its quick preset's episodes, no wall-clock limit;
+    paper keeps the paper preset's episodes; every trial gets its seed."""
+    from pes.algos.config import build_train_config
+
+    for algo in ("cbc-tp", "ppo", "maac"):
+        preset = build_train_config(algo, "quick")
+        cfg = train_config({"algo": algo, "seed": 2}, BUDGETS["quick"])
+        assert cfg.episodes == round(preset.episodes / 5) and cfg.time_limit == 0.0
+        assert cfg.seed == 2 and cfg.preset == "quick" and cfg.eval_episodes == 0
+    cfg = train_config({"algo": "cbc-tp", "seed": 0}, BUDGETS["paper"])
+    assert cfg.episodes == build_train_config("cbc-tp", "paper").episodes == 4000
 
 
 def test_user_mistakes(tmp_path, capsys):
