@@ -365,6 +365,7 @@ def write_report(
             "training_seconds": {
                 k: v["train"]["wall_s"] for k, v in evals.items() if v.get("train")
             },
+            "trial_seconds": {k: done[k].get("seconds_this_run") for k in evals},
             "machine": machine,
         },
     )
