@@ -24,13 +24,6 @@ FAST = dict(compile_env=False, tensorboard=False)
 BASELINES = ("ppo", "maac")
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """These networks are small: one thread is faster, and robust to a busy machine."""
-    torch.set_num_threads(1)
-    yield
-
-
 def test_gae_matches_a_hand_computation():
     gamma, lam = 0.9, 0.8
     reward = torch.tensor([[1.0], [2.0], [3.0], [4.0]])

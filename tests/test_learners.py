@@ -225,7 +225,6 @@ def test_cbc_tp_learns_on_a_tiny_budget(tmp_path):
     """Fixed seed, ~80 s: an identity-style task (one pursuer within 5 m of a randomly moving
     evader for two steps captures it, 100-step episodes, no buildings). The untrained swarm
     hovers and never captures; the trained one must chase, capture and earn more reward."""
-    torch.set_num_threads(1)
     env = dict(
         max_steps=100,
         num_pursuers=3,

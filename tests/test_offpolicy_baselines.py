@@ -25,14 +25,6 @@ FAST = dict(compile_env=False, tensorboard=False)
 BASELINES = ("maddpg", "ddpg", "bicnet")
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One thread, as the training runs: on a busy 2-core machine a two-thread batched matrix
-    product of these small networks waits ~8 ms on the other core (400x a one-thread one)."""
-    torch.set_num_threads(1)
-    yield
-
-
 def _state(n: int, num_envs: int = 6, damaged: int = 0, seed: int = 0):
     cfg = pes.EnvConfig(num_pursuers=n, capture_count=min(3, n), damaged=damaged)
     env = pes.make_env(cfg.replace(crash_mode="disable"), num_envs=num_envs, seed=seed)
