@@ -9,8 +9,11 @@ import pes
 
 
 @pytest.fixture(autouse=True)
-def _threads():
-    torch.set_num_threads(2)
+def _one_thread():
+    """One torch thread, as training runs use: the test networks and batches are small, and on a
+    busy 2-core machine a two-thread matrix product of them waits ~8 ms on the other core
+    (hundreds of times a one-thread one)."""
+    torch.set_num_threads(1)
     yield
 
 

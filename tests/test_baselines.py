@@ -4,13 +4,11 @@ attention critic), a tiny run of each through train/eval/resume, and learning te
 from __future__ import annotations
 
 import json
-import math
 
 import pytest
 import torch
 
 import pes
-from pes.algos import ALGOS
 from pes.algos.buffer import RolloutBuffer, gae
 from pes.algos.config import build_train_config
 from pes.algos.maac import AttentionCritic, SquashedGaussianActor
@@ -18,17 +16,9 @@ from pes.algos.policy import load_pursuer_policy
 from pes.algos.trainer import train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
-from pes.evaluate import evaluate
+from tests.learning import FAST, assert_learns
 
-FAST = dict(compile_env=False, tensorboard=False)
 BASELINES = ("ppo", "maac")
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """These networks are small: one thread is faster, and robust to a busy machine."""
-    torch.set_num_threads(1)
-    yield
 
 
 def test_gae_matches_a_hand_computation():
@@ -155,21 +145,6 @@ def test_baseline_config_errors():
         build_train_config("ppo", "tiny", {"rollout_steps": 0})
 
 
-CAPTURE_TASK = dict(
-    max_steps=100,
-    num_pursuers=3,
-    capture_count=1,
-    capture_radius=5.0,
-    capture_hold=2,
-    evader_policy="random",
-    dynamics="point_mass",
-    layout="empty",
-    self_weight=5.0,  # the quick presets' training reward
-    cooperation_weight=1.0,
-)
-"""The identity-style task of tests/test_learners.py: one pursuer within 5 m of a randomly
-moving evader for two steps captures it, 100-step episodes, no buildings."""
-
 LEARNING = {
     "ppo": dict(episodes=400, num_envs=16, rollout_steps=32, batch_size=64, hidden=64),
     "maac": dict(episodes=200),
@@ -179,18 +154,5 @@ LEARNING = {
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", BASELINES)
 def test_baseline_learns_on_a_tiny_budget(algo, tmp_path):
-    """Fixed seed, ~40 s (PPO) / ~65 s (MAAC): the untrained policy hovers and never captures;
-    the trained one must chase, capture and earn more reward."""
-    values = dict(FAST, env=CAPTURE_TASK, eval_episodes=0, log_every=50, **LEARNING[algo])
-    cfg = build_train_config(algo, "tiny", values)
-    train(cfg, tmp_path / "run", progress=False)
-    paper_reward = dict(self_weight=0.5, cooperation_weight=0.1)
-    eval_cfg = cfg.env_config().replace(crash_mode="disable", **paper_reward)
-    trained, _ = load_pursuer_policy(tmp_path / "run", eval_cfg)
-    torch.manual_seed(0)
-    untrained, _ = ALGOS[algo].build_policy(cfg, eval_cfg, "cpu")
-    good = evaluate(trained, eval_cfg, episodes=40, num_envs=40, seed=123)
-    base = evaluate(untrained, eval_cfg, episodes=40, num_envs=40, seed=123)
-    assert good.success_rate >= base.success_rate + 0.2, (good.summary(), base.summary())
-    assert good.mean_reward > base.mean_reward + 0.1, (good.summary(), base.summary())
-    assert math.isfinite(good.mean_steps)
+    """Fixed seed, ~40 s (PPO) / ~65 s (MAAC): see tests/learning.py."""
+    assert_learns(algo, tmp_path / "run", log_every=50, **LEARNING[algo])

@@ -130,6 +130,19 @@ def test_render_mp4_and_png(tmp_path, capsys):
     assert (tmp_path / "ep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_render_test_conditions(tmp_path):
+    """pes render plays pes eval's scenario: --damaged and --disturbance reach the episode."""
+    path = tmp_path / "ep.json"
+    argv = ["render", "--policy", "pid-pf", "--out", str(path), "--set", "max_steps=5"]
+    assert main([*argv, "--damaged", "2", "--disturbance"]) == 0
+    record = load_record(path)
+    assert record["config"]["damaged"] == 2 and record["config"]["disturbance"] is True
+    assert sum(not alive for alive in record["frames"][0]["alive"]) >= 2
+    assert main(argv) == 0
+    record = load_record(path)
+    assert record["config"]["damaged"] == 0 and record["config"]["disturbance"] is False
+
+
 def test_bench(capsys):
     out = run_json(
         capsys, "bench", "--num-envs", "1", "4", "--steps", "10", "--no-compile", "--json"

@@ -24,9 +24,7 @@ from pes.algos.policy import load_pursuer_policy
 from pes.algos.trainer import train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
-from pes.evaluate import evaluate
-
-FAST = dict(compile_env=False, tensorboard=False)
+from tests.learning import FAST, assert_learns
 
 
 def test_observations_rebuilt_from_global_state():
@@ -222,33 +220,8 @@ def test_resume_after_sigkill(tmp_path):
 
 
 def test_cbc_tp_learns_on_a_tiny_budget(tmp_path):
-    """Fixed seed, ~80 s: an identity-style task (one pursuer within 5 m of a randomly moving
-    evader for two steps captures it, 100-step episodes, no buildings). The untrained swarm
-    hovers and never captures; the trained one must chase, capture and earn more reward."""
-    torch.set_num_threads(1)
-    env = dict(
-        max_steps=100,
-        num_pursuers=3,
-        capture_count=1,
-        capture_radius=5.0,
-        capture_hold=2,
-        evader_policy="random",
-        dynamics="point_mass",
-        layout="empty",
-        self_weight=5.0,  # the quick preset's training reward
-        cooperation_weight=1.0,
-    )
-    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, episodes=200, env=env, eval_episodes=0))
-    train(cfg, tmp_path / "run", progress=False)
-    paper_reward = dict(self_weight=0.5, cooperation_weight=0.1)
-    eval_cfg = cfg.env_config().replace(crash_mode="disable", **paper_reward)
-    trained, _ = load_pursuer_policy(tmp_path / "run", eval_cfg)
-    torch.manual_seed(0)
-    untrained, _ = CBCTP.build_policy(cfg, eval_cfg, "cpu")
-    good = evaluate(trained, eval_cfg, episodes=40, num_envs=40, seed=123)
-    base = evaluate(untrained, eval_cfg, episodes=40, num_envs=40, seed=123)
-    assert good.success_rate >= base.success_rate + 0.2, (good.summary(), base.summary())
-    assert good.mean_reward > base.mean_reward + 0.1, (good.summary(), base.summary())
+    """Fixed seed, ~80 s: the identity-style capture task of tests/learning.py."""
+    assert_learns("cbc-tp", tmp_path / "run", episodes=200)
 
 
 def test_ddpg_evader_trains_and_plays_inside_the_env(tmp_path, capsys):

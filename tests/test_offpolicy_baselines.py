@@ -19,18 +19,9 @@ from pes.algos.policy import load_pursuer_policy
 from pes.algos.trainer import train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
-from pes.evaluate import evaluate
+from tests.learning import FAST, assert_learns
 
-FAST = dict(compile_env=False, tensorboard=False)
 BASELINES = ("maddpg", "ddpg", "bicnet")
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One thread, as the training runs: on a busy 2-core machine a two-thread batched matrix
-    product of these small networks waits ~8 ms on the other core (400x a one-thread one)."""
-    torch.set_num_threads(1)
-    yield
 
 
 def _state(n: int, num_envs: int = 6, damaged: int = 0, seed: int = 0):
@@ -176,30 +167,5 @@ def test_trains_resumes_and_evaluates(algo, tmp_path, capsys):
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", BASELINES)
 def test_learns_on_a_tiny_budget(algo, tmp_path):
-    """Fixed seed, 15-30 s each: CBC-TP's identity-style task (tests/test_learners.py): one
-    pursuer within 5 m of a randomly moving evader for two steps captures it, 100-step episodes,
-    no buildings. The untrained swarm hovers and never captures; the trained one must."""
-    env = dict(
-        max_steps=100,
-        num_pursuers=3,
-        capture_count=1,
-        capture_radius=5.0,
-        capture_hold=2,
-        evader_policy="random",
-        dynamics="point_mass",
-        layout="empty",
-        self_weight=5.0,  # the quick presets' training reward
-        cooperation_weight=1.0,
-    )
-    cfg = build_train_config(algo, "tiny", dict(FAST, episodes=200, env=env, eval_episodes=0))
-    train(cfg, tmp_path / "run", progress=False)
-    eval_cfg = cfg.env_config().replace(
-        crash_mode="disable", self_weight=0.5, cooperation_weight=0.1
-    )
-    trained, _ = load_pursuer_policy(tmp_path / "run", eval_cfg)
-    torch.manual_seed(0)
-    untrained, _ = ALGOS[algo].build_policy(cfg, eval_cfg, "cpu")
-    good = evaluate(trained, eval_cfg, episodes=40, num_envs=40, seed=123)
-    base = evaluate(untrained, eval_cfg, episodes=40, num_envs=40, seed=123)
-    assert good.success_rate >= base.success_rate + 0.2, (good.summary(), base.summary())
-    assert good.mean_reward > base.mean_reward + 0.1, (good.summary(), base.summary())
+    """Fixed seed, 15-30 s each: CBC-TP's learning check (tests/learning.py)."""
+    assert_learns(algo, tmp_path / "run", episodes=200)

@@ -119,6 +119,32 @@ def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "
     return record_episode(policy, config, seed=seed, device=device)
 
 
+def _add_test_options(p: argparse.ArgumentParser) -> None:
+    """--damaged and --disturbance, the paper's test conditions (pes eval, pes render)."""
+    p.add_argument(
+        "--damaged",
+        type=_non_negative,
+        default=None,
+        help="disable K random pursuers in every episode (anti-damage test)",
+    )
+    p.add_argument(
+        "--disturbance",
+        action="store_true",
+        help="random 5 %% weight pushes (the paper's evaluation setting)",
+    )
+
+
+def _test_scenario(args: argparse.Namespace) -> EnvConfig:
+    """The scenario of pes eval / pes render: crashes disable a pursuer, the default opponent,
+    and the --damaged / --disturbance test conditions, under the scenario options."""
+    defaults: dict[str, Any] = {"crash_mode": "disable", **_opponent()}
+    if args.disturbance:
+        defaults["disturbance"] = True
+    if args.damaged is not None:
+        defaults["damaged"] = args.damaged
+    return _scenario(args, **defaults)
+
+
 # --- commands --------------------------------------------------------------------------------
 
 
@@ -161,12 +187,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     from pes.evaluate import evaluate
 
-    defaults: dict[str, Any] = {"crash_mode": "disable", **_opponent()}
-    if args.disturbance:
-        defaults["disturbance"] = True
-    if args.damaged is not None:
-        defaults["damaged"] = args.damaged
-    config = _scenario(args, **defaults)
+    config = _test_scenario(args)
     policy = make_policy(args.policy, config, seed=args.seed, device=args.device)
     start = time.time()
     result = evaluate(
@@ -215,7 +236,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.record is not None:
         records = [load_record(args.record)]
     else:
-        config = _scenario(args, crash_mode="disable", **_opponent())
+        config = _test_scenario(args)
         records = (_run_episode(config, args.policy, args.seed + k) for k in range(args.episodes))
     many = args.record is None and args.episodes > 1
     written = []
@@ -421,17 +442,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="pid-pf, random, cbc-tp (the shipped swarm), or a policy.pt / checkpoint / run folder",
     )
     p.add_argument("--episodes", type=_positive, default=100, help="episodes (default: 100)")
-    p.add_argument(
-        "--damaged",
-        type=_non_negative,
-        default=None,
-        help="disable K random pursuers in every episode (anti-damage test)",
-    )
-    p.add_argument(
-        "--disturbance",
-        action="store_true",
-        help="random 5 %% weight pushes (the paper's evaluation setting)",
-    )
+    _add_test_options(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the first environment")
     p.add_argument(
         "--num-envs",
@@ -476,6 +487,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=2,
         help="GIF/MP4: draw every K-th step (default: 2)",
     )
+    _add_test_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_render)

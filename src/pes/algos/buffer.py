@@ -19,6 +19,44 @@ from pes.errors import ConfigError
 FieldSpec = dict[str, tuple[tuple[int, ...], torch.dtype]]
 
 
+def transition_fields(num_pursuers: int) -> FieldSpec:
+    """The fields of one multi-agent transition of ``n = num_pursuers``: the global state
+    (n + 1 agents x 8, the evader last) before and after, who is alive before and after, the
+    pursuers' actions (n, 2), their rewards (n,) and whether the episode terminated."""
+    n = num_pursuers
+    return {
+        "state": ((n + 1, 8), torch.float32),
+        "alive": ((n,), torch.bool),
+        "action": ((n, 2), torch.float32),
+        "reward": ((n,), torch.float32),
+        "next_state": ((n + 1, 8), torch.float32),
+        "next_alive": ((n,), torch.bool),
+        "terminated": ((), torch.bool),
+    }
+
+
+def transition(
+    before: dict[str, Tensor],
+    actions: Tensor,
+    reward: Tensor,
+    terminated: Tensor,
+    after: dict[str, Tensor],
+) -> dict[str, Tensor]:
+    """The :func:`transition_fields` (and ``ep_step``) of one vector step, from the env infos
+    ``before`` and ``after`` ``env.step`` (``after``'s ``final_*`` entries: the state that ended
+    an episode, not the reset that followed), actions (E, n, 2), reward (E, n), terminated (E,)."""
+    return {
+        "state": before["state"],
+        "alive": before["obs_mask"][:, :, 0],
+        "action": actions,
+        "reward": reward,
+        "next_state": after["final_state"],
+        "next_alive": after["final_obs_mask"][:, :, 0],
+        "terminated": terminated,
+        "ep_step": (after["steps"] - 1).to(torch.int32),
+    }
+
+
 class ReplayBuffer:
     """Time-major ring buffer of transitions from ``num_envs`` environments.
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from pes.algos.buffer import ReplayBuffer
+from pes.algos.buffer import ReplayBuffer, transition, transition_fields
 from pes.algos.common import masked_mean, optimise, soft_update, target_copy
 from pes.algos.config import TrainConfig
 from pes.algos.features import frames, pursuer_obs, relative_prediction
@@ -163,29 +163,10 @@ class CBCTP:
         self.opt_tp = (
             torch.optim.Adam(self.tp.parameters(), lr=cfg.lr_tp) if self.tp is not None else None
         )
-        a = self.n + 1
-        self.buffer = ReplayBuffer(
-            cfg.buffer_size,
-            cfg.num_envs,
-            {
-                "state": ((a, 8), torch.float32),
-                "alive": ((self.n,), torch.bool),
-                "action": ((self.n, 2), torch.float32),
-                "reward": ((self.n,), torch.float32),
-                "next_state": ((a, 8), torch.float32),
-                "next_alive": ((self.n,), torch.bool),
-                "terminated": ((), torch.bool),
-                **(
-                    {
-                        "pred": ((cfg.horizon, 2), torch.float32),
-                        "next_pred": ((cfg.horizon, 2), torch.float32),
-                    }
-                    if cfg.use_tp
-                    else {}
-                ),
-            },
-            device,
-        )
+        fields = transition_fields(self.n)
+        if cfg.use_tp:  # TP Net's predictions at s and s', inputs of the actor and the critic
+            fields["pred"] = fields["next_pred"] = ((cfg.horizon, 2), torch.float32)
+        self.buffer = ReplayBuffer(cfg.buffer_size, cfg.num_envs, fields, device)
         self.noise = OUNoise((cfg.num_envs, self.n, 2), cfg.noise_theta, 1.0, device=device)
         self.updates = 0
 
@@ -240,17 +221,7 @@ class CBCTP:
                     "pred": self.policy.last_prediction,
                     "next_pred": self.tp(after["final_history"]),
                 }
-        self.buffer.add(
-            **preds,
-            state=before["state"],
-            alive=before["obs_mask"][:, :, 0],
-            action=actions,
-            reward=reward,
-            next_state=after["final_state"],
-            next_alive=after["final_obs_mask"][:, :, 0],
-            terminated=terminated,
-            ep_step=(after["steps"] - 1).to(torch.int32),
-        )
+        self.buffer.add(**transition(before, actions, reward, terminated, after), **preds)
 
     def episode_reset(self, done: Tensor) -> None:
         self.noise.reset(done)

@@ -62,6 +62,26 @@ class ActorPolicy(nn.Module):
         """Stateless between steps."""
 
 
+class StochasticActorLearner:
+    """What PPO and MAAC share as learners: one stochastic actor, ``Actor(cfg, num_pursuers)``
+    with a ``mean_action``, on the pursuers' flat observations, so a trained policy serves only
+    the swarm size it was trained for."""
+
+    Actor: type[nn.Module]
+
+    @staticmethod
+    def fixed_swarm(cfg) -> str | None:
+        """Why a trained policy only serves the swarm size it was trained on
+        (:func:`pes.algos.policy.load_pursuer_policy` checks it)."""
+        return "has MLPs whose inputs are sized"
+
+    @classmethod
+    def build_policy(cls, cfg, env_cfg, device) -> tuple[ActorPolicy, dict[str, nn.Module]]:
+        """An untrained policy of this architecture, and its modules by name (to load into)."""
+        actor = cls.Actor(cfg, env_cfg.num_pursuers).to(device)
+        return ActorPolicy(actor), {"actor": actor}
+
+
 def gaussian_log_prob(x: Tensor, mean: Tensor, log_std: Tensor) -> Tensor:
     """Log density of ``x`` under N(mean, exp(log_std)^2), summed over the last dimension."""
     z = (x - mean) * torch.exp(-log_std)

@@ -35,9 +35,10 @@ import math
 import torch
 from torch import Tensor, nn
 
-from pes.algos.buffer import ReplayBuffer
+from pes.algos.buffer import ReplayBuffer, transition, transition_fields
 from pes.algos.common import (
     ActorPolicy,
+    StochasticActorLearner,
     gaussian_log_prob,
     masked_mean,
     optimise,
@@ -158,16 +159,17 @@ class Temperature(nn.Module):
         return self.log_alpha.exp()
 
 
-class MAAC:
+class MAAC(StochasticActorLearner):
     """The MAAC learner (soft actor-critic with attention critics)."""
 
     name = "maac"
+    Actor = SquashedGaussianActor
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
         self.cfg = cfg
         self.n = n = env_cfg.num_pursuers
         self.device = device
-        self.actor = SquashedGaussianActor(cfg, n).to(device)
+        self.actor = self.Actor(cfg, n).to(device)
         self.critics = nn.ModuleList(AttentionCritic(cfg, n) for _ in range(2)).to(device)
         self.critics_target = target_copy(self.critics)
         self.temperature = Temperature(cfg.alpha).to(device)
@@ -175,20 +177,7 @@ class MAAC:
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
         self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=cfg.lr_critic)
         self.opt_alpha = torch.optim.Adam(self.temperature.parameters(), lr=cfg.lr_alpha)
-        self.buffer = ReplayBuffer(
-            cfg.buffer_size,
-            cfg.num_envs,
-            {
-                "state": ((n + 1, 8), torch.float32),
-                "alive": ((n,), torch.bool),
-                "action": ((n, 2), torch.float32),
-                "reward": ((n,), torch.float32),
-                "next_state": ((n + 1, 8), torch.float32),
-                "next_alive": ((n,), torch.bool),
-                "terminated": ((), torch.bool),
-            },
-            device,
-        )
+        self.buffer = ReplayBuffer(cfg.buffer_size, cfg.num_envs, transition_fields(n), device)
         self.noise = None  # exploration is the policy's own sampling
         self.updates = 0
 
@@ -206,16 +195,7 @@ class MAAC:
 
     def record(self, before, actions, evader_actions, reward, terminated, after) -> None:
         """Store one vector step: ``before``/``after`` are the infos around ``env.step``."""
-        self.buffer.add(
-            state=before["state"],
-            alive=before["obs_mask"][:, :, 0],
-            action=actions,
-            reward=reward,
-            next_state=after["final_state"],
-            next_alive=after["final_obs_mask"][:, :, 0],
-            terminated=terminated,
-            ep_step=(after["steps"] - 1).to(torch.int32),
-        )
+        self.buffer.add(**transition(before, actions, reward, terminated, after))
 
     def episode_reset(self, done: Tensor) -> None:
         """Stateless between episodes."""
@@ -294,16 +274,3 @@ class MAAC:
     def policy_modules(self) -> dict[str, nn.Module]:
         """What a deployed policy needs: the actors."""
         return {"actor": self.actor}
-
-    @staticmethod
-    def fixed_swarm(cfg: TrainConfig) -> str | None:
-        """Why a trained policy only serves the swarm size it was trained on."""
-        return "has MLPs whose inputs are sized"
-
-    @staticmethod
-    def build_policy(cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[ActorPolicy, dict]:
-        """An untrained policy of this architecture, and its modules by name (to load into).
-        The flat-observation actors serve only the swarm size they were trained for
-        (:func:`pes.algos.policy.load_pursuer_policy` checks it, see ``fixed_swarm``)."""
-        actor = SquashedGaussianActor(cfg, env_cfg.num_pursuers).to(device)
-        return ActorPolicy(actor), {"actor": actor}

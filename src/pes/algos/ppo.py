@@ -33,6 +33,7 @@ from torch import Tensor, nn
 from pes.algos.buffer import RolloutBuffer, gae
 from pes.algos.common import (
     ActorPolicy,
+    StochasticActorLearner,
     gaussian_log_prob,
     masked_mean,
     optimise,
@@ -76,10 +77,11 @@ class PPOActors(nn.Module):
         return self(obs, mask)[0].clamp(-1.0, 1.0)
 
 
-class PPO:
+class PPO(StochasticActorLearner):
     """The PPO learner (independent learners, parameter-shared by default)."""
 
     name = "ppo"
+    Actor = PPOActors
     on_policy = True
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
@@ -87,7 +89,7 @@ class PPO:
         self.n = n = env_cfg.num_pursuers
         self.max_steps = env_cfg.max_steps
         self.device = device
-        self.actor = PPOActors(cfg, n).to(device)
+        self.actor = self.Actor(cfg, n).to(device)
         self.value = PerAgent(
             lambda: FlatObsMLP(n, cfg.hidden, 1, 2, cfg.obstacle_scale, cfg.target_scale),
             n,
@@ -258,16 +260,3 @@ class PPO:
     def policy_modules(self) -> dict[str, nn.Module]:
         """What a deployed policy needs: the actor."""
         return {"actor": self.actor}
-
-    @staticmethod
-    def fixed_swarm(cfg: TrainConfig) -> str | None:
-        """Why a trained policy only serves the swarm size it was trained on."""
-        return "has MLPs whose inputs are sized"
-
-    @staticmethod
-    def build_policy(cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[ActorPolicy, dict]:
-        """An untrained policy of this architecture, and its modules by name (to load into).
-        The flat-observation networks serve only the swarm size they were trained for
-        (:func:`pes.algos.policy.load_pursuer_policy` checks it, see ``fixed_swarm``)."""
-        actor = PPOActors(cfg, env_cfg.num_pursuers).to(device)
-        return ActorPolicy(actor), {"actor": actor}
