@@ -61,3 +61,21 @@ def test_evaluate_rejects_zero_episodes():
 
     with pytest.raises(ConfigError):
         evaluate(RandomPolicy(), pes.EnvConfig(), episodes=0)
+
+
+def test_calibration_cases(monkeypatch):
+    """The calibration measures the flee cases and the shipped DDPG evader's speed ladder, each
+    in its own scenario."""
+    from pes.experiments import calibration
+
+    cases = calibration.cases()
+    ddpg = [name for name in cases if "DDPG" in name]
+    assert len(ddpg) == len(calibration.EVADER_SPEEDS)
+    assert cases[ddpg[0]][1] == {"evader_policy": "ddpg", "evader_max_speed": 8.0}
+    monkeypatch.setattr(
+        calibration, "CASES", {"random, 5 pursuers": calibration.CASES["random, 5 pursuers"]}
+    )
+    monkeypatch.setattr(calibration, "EVADER_SPEEDS", (9.0,))
+    cases = calibration.cases()
+    rows = calibration.run(episodes=2, seed=0)
+    assert list(rows) == list(cases) and all(r["episodes"] == 2 for r in rows.values())

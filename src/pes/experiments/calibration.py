@@ -3,13 +3,17 @@
     python -m pes.experiments.calibration --episodes 1000 --out results/calibration.json
 
 Measures, with the paper's evaluation settings (disturbance on, ``crash_mode="disable"``),
-against the scripted ``flee`` evader on the default map:
+on the default map, against the scripted ``flee`` evader:
 
 * five PID(PF) pursuers (capture: 3 within 2 m for 5 steps) -- the paper reports 27.3 % for
   PID(PF) against its DDPG evader;
 * one PID(PF) pursuer (capture: 1 within 2 m for 5 steps) -- a lone pursuer should essentially
   never catch the faster evader;
-* five random pursuers, for scale.
+* five random pursuers, for scale;
+
+and against the shipped DDPG evader (if this installation has it), five PID(PF) pursuers with
+the evader's top speed capped at 8 ... 12 m/s (12: the scenario's default; the pursuers fly at
+10): how much of the game's difficulty is the evader's speed.
 """
 
 from __future__ import annotations
@@ -32,11 +36,29 @@ CASES = {
     "pid-pf, 1 pursuer": (PIDPotentialField, {"num_pursuers": 1, "capture_count": 1}),
     "random, 5 pursuers": (RandomPolicy, {"num_pursuers": 5, "capture_count": 3}),
 }
+"""Name -> (pursuer policy, scenario overrides), against ``flee``."""
+
+EVADER_SPEEDS = (8.0, 9.0, 10.0, 11.0, 12.0)
+"""Top speeds (m/s) of the shipped DDPG evader against five PID(PF) pursuers."""
+
+
+def cases() -> dict[str, tuple[type, dict]]:
+    """Every case measured: :data:`CASES`, then the DDPG evader at :data:`EVADER_SPEEDS`."""
+    from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: PLC0415
+
+    out = dict(CASES)
+    if (MODELS_DIR / SHIPPED["evader-ddpg"]).is_file():
+        for v in EVADER_SPEEDS:
+            out[f"pid-pf, 5 pursuers, DDPG evader at {v:g} m/s"] = (
+                PIDPotentialField,
+                {"evader_policy": "ddpg", "evader_max_speed": v},
+            )
+    return out
 
 
 def run(episodes: int, seed: int) -> dict:
     rows = {}
-    for name, (policy_cls, overrides) in CASES.items():
+    for name, (policy_cls, overrides) in cases().items():
         config = EnvConfig(disturbance=True, crash_mode="disable", **overrides).validate()
         start = time.time()
         result = evaluate(
@@ -68,7 +90,7 @@ def main() -> int:
         "command": "python -m pes.experiments.calibration " + " ".join(sys.argv[1:]),
         "date": time.strftime("%Y-%m-%d"),
         "machine": machine_info(),
-        "settings": "default map, flee evader, disturbance on, crash_mode=disable",
+        "settings": "default map, flee evader unless named, disturbance on, crash_mode=disable",
         "results": run(args.episodes, args.seed),
     }
     out = Path(args.out)
