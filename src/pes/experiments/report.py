@@ -163,7 +163,10 @@ def _band(ax, runs: list[np.ndarray], key: str, label: str, scale: float = 1.0) 
     (line,) = ax.plot(grid, mean, label=f"{label} ({len(runs)} seeds)")
     if len(runs) > 1:
         std = ys.std(0, ddof=1)
-        ax.fill_between(grid, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+        low, high = mean - std, mean + std
+        if key == "success_rate":  # a rate: the band stays within 0 ... 100 %
+            low, high = np.clip(low, 0.0, 100.0), np.clip(high, 0.0, 100.0)
+        ax.fill_between(grid, low, high, color=line.get_color(), alpha=0.2)
 
 
 def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[str, str]]:
@@ -179,7 +182,8 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
     curves = _curves(out, specs, done)
     training = (
         "training episodes (exploration noise on, crashes continue, no disturbance, the "
-        "training reward of each method's preset), mean ± std over seeds, one point per log row"
+        "training reward of each method's preset), mean ± std over seeds (success-rate bands "
+        "cut at 0 %), one point per log row"
     )
     panels = (
         ("fig6_success_rate.png", "success_rate", "success rate (%)", 100.0, "Fig. 6"),
