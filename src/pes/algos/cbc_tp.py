@@ -294,8 +294,16 @@ class CBCTP:
         # (a penalty on the action itself vanishes there).
         reg = masked_mean((pre**2).sum(-1), acting)
         actor_loss = -masked_mean(q_pi, acting) + cfg.action_reg * reg
-        optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
+        return self.finish_update(actor_loss, critic_loss, q, alive, stats)
 
+    def finish_update(
+        self, actor_loss: Tensor, critic_loss: Tensor, q: Tensor, alive: Tensor, stats: dict
+    ) -> dict[str, float]:
+        """The end of every actor-critic update (CBC-TP and its MADDPG / DDPG / BiCNet
+        relatives): the actor's step, the soft target updates, the losses and the mean Q of the
+        alive pursuers (q, alive: (B, N)) added to ``stats``, which is returned."""
+        cfg = self.cfg
+        optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
         soft_update(self.actor_target, self.actor, cfg.tau)
         soft_update(self.critic_target, self.critic, cfg.tau)
         stats.update(

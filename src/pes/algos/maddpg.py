@@ -31,7 +31,7 @@ import torch
 from torch import Tensor, nn
 
 from pes.algos.cbc_tp import CBCTP
-from pes.algos.common import masked_mean, optimise, soft_update
+from pes.algos.common import masked_mean, optimise
 from pes.algos.config import TrainConfig
 from pes.algos.features import pursuer_obs
 from pes.algos.nets import RowScaled
@@ -208,13 +208,4 @@ class MADDPG(CBCTP):
         self.critic.requires_grad_(True)
         reg = masked_mean((pre**2).sum(-1), alive)
         actor_loss = -masked_mean(q_pi, alive) + cfg.action_reg * reg
-        optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
-
-        soft_update(self.actor_target, self.actor, cfg.tau)
-        soft_update(self.critic_target, self.critic, cfg.tau)
-        stats.update(
-            critic_loss=float(critic_loss.detach()),
-            actor_loss=float(actor_loss.detach()),
-            q_mean=float(masked_mean(q.detach(), alive)),
-        )
-        return stats
+        return self.finish_update(actor_loss, critic_loss, q, alive, stats)
