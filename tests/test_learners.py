@@ -21,7 +21,7 @@ from pes.algos.features import frames, pursuer_obs
 from pes.algos.io import save_atomic
 from pes.algos.nets import CBCActor, CBCCritic, TPNet
 from pes.algos.policy import load_pursuer_policy
-from pes.algos.trainer import train
+from pes.algos.trainer import init_networks, train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
 from tests.learning import FAST, assert_learns
@@ -151,6 +151,46 @@ def test_all_pursuer_actor_gradient_trains(tmp_path):
     assert summary["updates"] > 0 and (tmp_path / "all" / "policy.pt").is_file()
     with pytest.raises(ConfigError, match="actor_gradient"):
         build_train_config("cbc-tp", "tiny", {"actor_gradient": "some"})
+
+
+def test_evader_speed_curriculum_rises_with_success(tmp_path):
+    """Every episode is a capture (one pursuer within 500 m for one step), so every log row
+    raises the evader's cap by a step, up to the configured top speed."""
+    easy = dict(max_steps=20, capture_count=1, capture_radius=500.0, capture_hold=1)
+    _tiny(
+        tmp_path / "cur",
+        episodes=40,
+        log_every=8,
+        eval_episodes=0,
+        curriculum_speed=9.0,
+        curriculum_step=1.0,
+        curriculum_success=0.5,
+        env=dict(easy, evader_max_speed=11.0),
+    )
+    rows = (tmp_path / "cur" / "progress.csv").read_text().splitlines()
+    col = rows[0].split(",").index("evader_speed")
+    speeds = [float(r.split(",")[col]) for r in rows[1:]]
+    assert speeds == [9.0, 10.0, 11.0, 11.0, 11.0]
+    for bad in (dict(curriculum_speed=13.0), dict(curriculum_step=0.0)):
+        with pytest.raises(ConfigError, match="curriculum"):
+            build_train_config("cbc-tp", "tiny", bad)
+    env = pes.make_env(pes.EnvConfig(), num_envs=2, seed=0)
+    with pytest.raises(ConfigError, match="evader speed"):
+        env.set_evader_max_speed(12.5)
+
+
+def test_init_from_a_checkpoint_copies_every_network(tmp_path):
+    _tiny(tmp_path / "src", episodes=8, eval_episodes=0)
+    source = torch.load(tmp_path / "src" / "checkpoint.pt", weights_only=True)["modules"]
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, init_from=str(tmp_path / "src")))
+    learner = CBCTP(cfg, cfg.env_config(), torch.device("cpu"))
+    init_networks(learner, cfg)
+    for name, module in learner.modules().items():
+        for key, value in module.state_dict().items():
+            assert torch.equal(value, source[name][key]), (name, key)
+    other = build_train_config("maddpg", "tiny", dict(FAST, init_from=str(tmp_path / "src")))
+    with pytest.raises(CheckpointError, match="holds a cbc-tp run"):
+        train(other, tmp_path / "other", progress=False)
 
 
 def test_mismatched_checkpoint_is_refused(tmp_path, capsys):

@@ -138,6 +138,19 @@ class TrainConfig:
     attend_reg: float = 1e-3
     """MAAC: weight of the squared attention logits in the critic loss (as the original)."""
 
+    # --- curriculum and warm start --------------------------------------------------------------
+    curriculum_speed: float = 0.0
+    """Evader-speed curriculum (m/s; 0 = off): the evader starts capped at this speed and the cap
+    rises by ``curriculum_step`` whenever a log row's training success rate reaches
+    ``curriculum_success``, up to ``env.evader_max_speed``. Evaluations use the full speed."""
+    curriculum_step: float = 0.5
+    """Evader-speed curriculum: m/s added at each raise."""
+    curriculum_success: float = 0.3
+    """Evader-speed curriculum: training success rate (0-1) of a log row that raises the cap."""
+    init_from: str = ""
+    """Start every network (and target network) from this run's ``checkpoint.pt`` (same
+    algorithm and architecture); optimisers, replay buffer, noise and counters start fresh."""
+
     # --- opponent (evader training) ---
     opponent: str = "pid-pf"
     """Pursuers the DDPG evader trains against (``pid-pf`` or ``random``)."""
@@ -223,6 +236,18 @@ class TrainConfig:
             raise ConfigError(f"device must be cpu or cuda, got '{self.device}'")
         if self.actor_gradient not in ("one", "all"):
             raise ConfigError(f"actor_gradient must be one or all, got '{self.actor_gradient}'")
+        top_speed = self.env_config().evader_max_speed
+        if self.curriculum_speed and not 0.0 < self.curriculum_speed <= top_speed:
+            raise ConfigError(
+                f"curriculum_speed must be 0 (off) or in (0, {top_speed:g}] m/s "
+                f"(env.evader_max_speed), got {self.curriculum_speed}"
+            )
+        if self.curriculum_step <= 0:
+            raise ConfigError(f"curriculum_step must be positive, got {self.curriculum_step}")
+        if not 0.0 < self.curriculum_success <= 1.0:
+            raise ConfigError(
+                f"curriculum_success must be in (0, 1], got {self.curriculum_success}"
+            )
         if self.opponent not in ("pid-pf", "random"):
             raise ConfigError(f"opponent must be pid-pf or random, got '{self.opponent}'")
         self.env_config()  # checks the scenario keys

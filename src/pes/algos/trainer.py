@@ -72,9 +72,11 @@ LOG_COLUMNS = (
     "alpha",
     "env_steps_per_s",
     "updates_per_s",
+    "evader_speed",
 )
 """Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) reward
-divided by its steps, averaged over the row's episodes (SPEC §4)."""
+divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
+evader's speed cap (m/s) during the row's episodes."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
 REWARD_KEYS = (
@@ -98,6 +100,7 @@ RESUMABLE_CHANGES = {
     "threads",
     "compile_env",
     "tensorboard",
+    "init_from",
 }
 
 
@@ -109,6 +112,7 @@ class Progress:
     wall_s: float = 0.0
     update_credit: float = 0.0
     best_score: float = -math.inf
+    evader_speed: float = 0.0  # the curriculum's current cap (m/s); 0 = no curriculum
 
 
 class RunLogger:
@@ -117,8 +121,12 @@ class RunLogger:
     def __init__(self, out: Path, tensorboard: bool, resume: bool) -> None:
         self.path = out / "progress.csv"
         new = not (resume and self.path.exists() and self.path.stat().st_size > 0)
+        columns = LOG_COLUMNS
+        if not new:  # keep the columns of the run's log (it may predate a new column)
+            with open(self.path, newline="") as f:
+                columns = tuple(next(csv.reader(f)))
         self.file = open(self.path, "w" if new else "a", newline="")  # noqa: SIM115
-        self.writer = csv.DictWriter(self.file, fieldnames=LOG_COLUMNS)
+        self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore")
         if new:
             self.writer.writeheader()
             self.file.flush()
@@ -132,7 +140,7 @@ class RunLogger:
                 self.tb = None
 
     def write(self, row: dict[str, float]) -> None:
-        self.writer.writerow({k: row.get(k, "") for k in LOG_COLUMNS})
+        self.writer.writerow({k: row.get(k, "") for k in self.writer.fieldnames})
         self.file.flush()
         if self.tb is not None:
             for k, v in row.items():
@@ -151,8 +159,11 @@ def _rng_state(gen: torch.Generator) -> dict[str, Any]:
 
 
 def _check_resumable(saved: dict[str, Any], cfg: TrainConfig, path: Path) -> None:
-    now = to_dict(cfg)
-    diff = sorted(k for k in now if k not in RESUMABLE_CHANGES and saved.get(k) != now[k])
+    now, defaults = to_dict(cfg), to_dict(TrainConfig())
+    # A key the checkpoint predates counts as its default.
+    diff = sorted(
+        k for k in now if k not in RESUMABLE_CHANGES and saved.get(k, defaults[k]) != now[k]
+    )
     if diff:
         raise CheckpointError(
             f"'{path}' was trained with different settings ({', '.join(diff)}); resume with "
@@ -208,6 +219,10 @@ def train(
         gen.set_state(ckpt["rng"]["sampler"])
         prog = Progress(**ckpt["progress"])
         learner.updates = prog.updates
+    else:
+        if cfg.init_from:
+            init_networks(learner, cfg)
+        prog.evader_speed = cfg.curriculum_speed
     save_yaml(cfg, out / "config.yaml")
 
     def checkpoint() -> None:
@@ -260,6 +275,9 @@ def train(
         seed=cfg.seed * 1_000_003 + prog.episodes,
         compile=cfg.compile_env,
     )
+    top_speed = env.evader_max_speed
+    if prog.evader_speed > 0:
+        env.set_evader_max_speed(prog.evader_speed)
     obs, info = env.reset()
     learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=device))
     logger = RunLogger(out, cfg.tensorboard, resume)
@@ -332,6 +350,7 @@ def train(
                     "noise": scale,
                     "env_steps_per_s": (prog.env_steps - row_start[1]) / dt,
                     "updates_per_s": (prog.updates - row_start[2]) / dt,
+                    "evader_speed": env.evader_max_speed,
                 }
                 row.update({k: v / stats_count[k] for k, v in stats_sum.items()})
                 logger.write(row)
@@ -344,10 +363,20 @@ def train(
                 if score >= prog.best_score:
                     prog.best_score = score
                     save_policy(out / "best_policy.pt", {**meta(), "best_at": prog.episodes})
+                if (
+                    0 < prog.evader_speed < top_speed
+                    and row["success_rate"] >= cfg.curriculum_success
+                ):
+                    # Harder from the next step on; the best policy is then sought afresh at
+                    # the new speed (success rates at different speeds do not compare).
+                    prog.evader_speed = min(top_speed, prog.evader_speed + cfg.curriculum_step)
+                    env.set_evader_max_speed(prog.evader_speed)
+                    prog.best_score = -math.inf
                 bar.set_postfix(
                     success=f"{row['success_rate']:.2f}",
                     steps=f"{row['episode_steps']:.0f}",
                     reward=f"{row['avg_reward']:.3f}",
+                    **({"evader": f"{prog.evader_speed:g}m/s"} if prog.evader_speed else {}),
                 )
                 window = {k: [] for k in window}
                 stats_sum, stats_count = {}, {}
@@ -391,6 +420,20 @@ def train(
         summary["eval"] = evaluate_run(out / "policy.pt", cfg, cfg.eval_episodes, progress)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def init_networks(learner, cfg: TrainConfig) -> None:
+    """Load every network of ``learner`` (target networks included) from the checkpoint
+    ``cfg.init_from`` (a run folder or its ``checkpoint.pt``)."""
+    path = Path(cfg.init_from)
+    if path.is_dir():
+        path = path / "checkpoint.pt"
+    ckpt = load_file(path, CHECKPOINT_FORMAT)
+    if ckpt.get("algo") != cfg.algo:
+        raise CheckpointError(
+            f"init_from: '{path}' holds a {ckpt.get('algo')} run, this run trains {cfg.algo}"
+        )
+    load_modules(learner.modules(), ckpt["modules"], str(path))
 
 
 def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: bool) -> dict:

@@ -104,6 +104,24 @@ class PursuitEvasionEnv:
         """Shape of one environment's actions: (N, 2)."""
         return (self.num_pursuers, 2)
 
+    def set_evader_max_speed(self, speed: float) -> None:
+        """Cap the evader's speed at ``speed`` m/s from the next step on (a training curriculum).
+
+        Only the cap of the dynamics changes: the evader's observations keep the configured
+        ``evader_max_speed`` as their velocity unit, so a learned evader sees the units it was
+        trained in. Works on the fused step too (the cap is a tensor the graph reads).
+        """
+        if not 0.0 < speed <= self.config.evader_max_speed:
+            raise ConfigError(
+                f"evader speed must be in (0, {self.config.evader_max_speed:g}] m/s, got {speed}"
+            )
+        self.scenario.params.max_speed[-1] = float(speed)
+
+    @property
+    def evader_max_speed(self) -> float:
+        """The evader's current speed cap, m/s."""
+        return float(self.scenario.params.max_speed[-1])
+
     # --- the API --------------------------------------------------------------------------------
     def reset(self, seed: int | None = None) -> tuple[Tensor, dict[str, Tensor]]:
         """Start a new episode in every environment.
