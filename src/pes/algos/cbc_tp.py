@@ -35,6 +35,7 @@ from pes.algos.config import TrainConfig
 from pes.algos.features import frames, pursuer_obs, relative_prediction
 from pes.algos.nets import CBCActor, CBCCritic, TPNet
 from pes.algos.noise import OUNoise
+from pes.policies import SCRIPTED
 from pes.sim.config import EnvConfig
 
 
@@ -166,6 +167,10 @@ class CBCTP:
         fields = transition_fields(self.n)
         if cfg.use_tp:  # TP Net's predictions at s and s', inputs of the actor and the critic
             fields["pred"] = fields["next_pred"] = ((cfg.horizon, 2), torch.float32)
+        self.demo = None
+        if cfg.demo_policy:  # demonstrations, marked in the buffer for the actor's BC term
+            self.demo = SCRIPTED[cfg.demo_policy](env_cfg)
+            fields["demo"] = ((), torch.bool)
         self.buffer = ReplayBuffer(cfg.buffer_size, cfg.num_envs, fields, device)
         self.noise = OUNoise((cfg.num_envs, self.n, 2), cfg.noise_theta, 1.0, device=device)
         self.updates = 0
@@ -200,6 +205,8 @@ class CBCTP:
         """(E, N, 2) actions of the current actor plus OU noise, clipped to [-1, 1], and no
         evader actions (the environment's evader plays)."""
         actions = self.policy.act(obs, info)
+        if self.demonstrating():
+            actions = self.demo(obs, info)
         if noise_scale > 0:
             actions = actions + self.noise.sample(gen, noise_scale)
         return actions.clamp(-1.0, 1.0), None
@@ -221,10 +228,18 @@ class CBCTP:
                     "pred": self.policy.last_prediction,
                     "next_pred": self.tp(after["final_history"]),
                 }
+        if self.demo is not None:
+            preds["demo"] = torch.full_like(terminated, self.demonstrating())
         self.buffer.add(**transition(before, actions, reward, terminated, after), **preds)
+
+    def demonstrating(self) -> bool:
+        """Whether the demonstration policy plays the next step (``demo_transitions``)."""
+        return self.demo is not None and len(self.buffer) < self.cfg.demo_transitions
 
     def episode_reset(self, done: Tensor) -> None:
         self.noise.reset(done)
+        if self.demo is not None:
+            self.demo.reset(done)
 
     # --- learning --------------------------------------------------------------------------------
     def ready(self) -> bool:
@@ -294,6 +309,14 @@ class CBCTP:
         # (a penalty on the action itself vanishes there).
         reg = masked_mean((pre**2).sum(-1), acting)
         actor_loss = -masked_mean(q_pi, acting) + cfg.action_reg * reg
+        if self.demo is not None and cfg.bc_weight > 0:
+            # Behaviour cloning on demonstrations the critic rates above the actor's own action
+            # (Q-filter); the other pursuers' actions are the stored ones, so they add nothing.
+            demo = buf.get("demo", row, env).unsqueeze(-1) & acting
+            better = demo & (q.detach() > q_pi.detach())
+            bc = ((new_action - action) ** 2).sum(-1)
+            actor_loss = actor_loss + cfg.bc_weight * (bc * better).sum() / len(row)
+            stats["bc_share"] = float(better.sum()) / max(float(acting.sum()), 1.0)
         return self.finish_update(actor_loss, critic_loss, q, alive, stats)
 
     def finish_update(

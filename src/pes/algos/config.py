@@ -151,6 +151,19 @@ class TrainConfig:
     """Start every network (and target network) from this run's ``checkpoint.pt`` (same
     algorithm and architecture); optimisers, replay buffer, noise and counters start fresh."""
 
+    # --- demonstrations (CBC-TP, CBC Net, BiCNet) ------------------------------------------------
+    demo_policy: str = ""
+    """A scripted pursuer policy (``pid-pf``) that plays, with the exploration noise, the first
+    ``demo_transitions`` transitions of a run ("" = none); its transitions are marked in the
+    replay buffer as demonstrations (as DDPGfD, Vecerik et al. 2017)."""
+    demo_transitions: int = 0
+    """Transitions the demonstration policy plays (at most ``buffer_size``)."""
+    bc_weight: float = 0.0
+    """Weight of the behaviour-cloning term of the actor loss: the squared distance between
+    the actor's and the demonstrated action on demonstration samples where the critic rates
+    the demonstrated action higher (the Q-filter of Nair et al. 2018). It fades as the
+    demonstrations leave the replay buffer."""
+
     # --- opponent (evader training) ---
     opponent: str = "pid-pf"
     """Pursuers the DDPG evader trains against (``pid-pf`` or ``random``)."""
@@ -213,6 +226,7 @@ class TrainConfig:
             "alpha",
             "lr_alpha",
             "attend_reg",
+            "bc_weight",
         ):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
@@ -247,6 +261,15 @@ class TrainConfig:
         if not 0.0 < self.curriculum_success <= 1.0:
             raise ConfigError(
                 f"curriculum_success must be in (0, 1], got {self.curriculum_success}"
+            )
+        if self.demo_policy:
+            if self.demo_policy != "pid-pf":
+                raise ConfigError(f"demo_policy must be '' or pid-pf, got '{self.demo_policy}'")
+            if self.algo not in ("cbc-tp", "cbc", "bicnet"):
+                raise ConfigError(f"demo_policy is for cbc-tp, cbc and bicnet, not {self.algo}")
+        if not 0 <= self.demo_transitions <= self.buffer_size:
+            raise ConfigError(
+                f"demo_transitions must be in [0, buffer_size], got {self.demo_transitions}"
             )
         if self.opponent not in ("pid-pf", "random"):
             raise ConfigError(f"opponent must be pid-pf or random, got '{self.opponent}'")

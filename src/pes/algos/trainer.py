@@ -73,10 +73,12 @@ LOG_COLUMNS = (
     "env_steps_per_s",
     "updates_per_s",
     "evader_speed",
+    "bc_share",
 )
 """Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) reward
 divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
-evader's speed cap (m/s) during the row's episodes."""
+evader's speed cap (m/s) during the row's episodes; ``bc_share`` the share of actor samples
+cloning a demonstration (``demo_policy``)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
 REWARD_KEYS = (
