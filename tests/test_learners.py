@@ -193,6 +193,61 @@ def test_init_from_a_checkpoint_copies_every_network(tmp_path):
         train(other, tmp_path / "other", progress=False)
 
 
+def test_demonstrations_fill_the_buffer_and_are_cloned():
+    """PID(PF) plays the first demo_transitions (marked in the buffer); the BC term then pulls
+    the actor towards PID(PF)'s actions."""
+    values = dict(
+        FAST,
+        demo_policy="pid-pf",
+        demo_transitions=800,
+        bc_weight=5.0,
+        lr_actor=3e-3,
+        warmup=400,
+        batch_size=128,
+        noise_sigma=0.0,
+        noise_sigma_final=0.0,
+    )
+    cfg = build_train_config("cbc-tp", "tiny", values)
+    env_cfg = cfg.env_config()
+    learner = CBCTP(cfg, env_cfg, torch.device("cpu"))
+    env = pes.make_env(env_cfg, num_envs=cfg.num_envs, seed=0)
+    pid = pes.policies.PIDPotentialField(env_cfg)
+    gen = torch.Generator().manual_seed(0)
+    obs, info = env.reset()
+    learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool))
+    probes = []
+    for step in range(150):
+        actions, _ = learner.act(obs, info, 0.0, gen)
+        expected = pid(obs, info)
+        if step < 100:  # 800 transitions of 8 environments: PID(PF) plays
+            torch.testing.assert_close(actions, expected.clamp(-1, 1))
+            probes.append((obs, info, expected.clamp(-1, 1)))
+        obs2, reward, term, trunc, info2 = env.step(actions)
+        learner.record(info, actions, None, reward, term, info2)
+        done = term | trunc
+        if bool(done.any()):
+            learner.episode_reset(done)
+            pid.reset(done)
+        obs, info = obs2, info2
+    flags = learner.buffer.data["demo"][: learner.buffer.filled]
+    assert bool(flags[:100].all()) and not bool(flags[100:].any())
+
+    def gap() -> float:
+        with torch.no_grad():
+            return sum(
+                float(((learner.policy.act(o, i) - a) ** 2).mean()) for o, i, a in probes[::10]
+            )
+
+    before = gap()
+    shares = [learner.update(gen).get("bc_share", 0.0) for _ in range(300)]
+    assert 0.5 < shares[-1] < 1.0  # 800 of the 1200 transitions are demonstrations
+    assert gap() < 0.75 * before  # without the BC term it grows (x1.8 in 300 updates)
+    with pytest.raises(ConfigError, match="demo_policy"):
+        build_train_config("maddpg", "tiny", {"demo_policy": "pid-pf"})
+    with pytest.raises(ConfigError, match="demo_transitions"):
+        build_train_config("cbc-tp", "tiny", {"demo_transitions": 10**9})
+
+
 def test_mismatched_checkpoint_is_refused(tmp_path, capsys):
     _tiny(tmp_path / "run", episodes=8, eval_episodes=0)
     with pytest.raises(CheckpointError, match="different settings"):

@@ -310,13 +310,12 @@ class CBCTP:
         reg = masked_mean((pre**2).sum(-1), acting)
         actor_loss = -masked_mean(q_pi, acting) + cfg.action_reg * reg
         if self.demo is not None and cfg.bc_weight > 0:
-            # Behaviour cloning on demonstrations the critic rates above the actor's own action
-            # (Q-filter); the other pursuers' actions are the stored ones, so they add nothing.
+            # Behaviour cloning on the demonstrations; the other pursuers' actions are the
+            # stored ones, so they add nothing.
             demo = buf.get("demo", row, env).unsqueeze(-1) & acting
-            better = demo & (q.detach() > q_pi.detach())
             bc = ((new_action - action) ** 2).sum(-1)
-            actor_loss = actor_loss + cfg.bc_weight * (bc * better).sum() / len(row)
-            stats["bc_share"] = float(better.sum()) / max(float(acting.sum()), 1.0)
+            actor_loss = actor_loss + cfg.bc_weight * (bc * demo).sum() / len(row)
+            stats["bc_share"] = float(demo.sum()) / max(float(acting.sum()), 1.0)
         return self.finish_update(actor_loss, critic_loss, q, alive, stats)
 
     def finish_update(

@@ -159,10 +159,11 @@ class TrainConfig:
     demo_transitions: int = 0
     """Transitions the demonstration policy plays (at most ``buffer_size``)."""
     bc_weight: float = 0.0
-    """Weight of the behaviour-cloning term of the actor loss: the squared distance between
-    the actor's and the demonstrated action on demonstration samples where the critic rates
-    the demonstrated action higher (the Q-filter of Nair et al. 2018). It fades as the
-    demonstrations leave the replay buffer."""
+    """Weight of the behaviour-cloning term of the actor loss: the squared distance between the
+    actor's and the demonstrated action, on the demonstration samples of each minibatch. It
+    fades as the demonstrations leave the replay buffer. (The Q-filter of Nair et al. 2018,
+    cloning only where the critic rates the demonstration higher, pushed the actor away from
+    PID(PF) while the critic was young: not used.)"""
 
     # --- opponent (evader training) ---
     opponent: str = "pid-pf"

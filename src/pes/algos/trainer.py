@@ -78,7 +78,7 @@ LOG_COLUMNS = (
 """Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) reward
 divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
 evader's speed cap (m/s) during the row's episodes; ``bc_share`` the share of actor samples
-cloning a demonstration (``demo_policy``)."""
+that are demonstrations (``demo_policy``)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
 REWARD_KEYS = (
