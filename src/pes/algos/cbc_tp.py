@@ -204,9 +204,9 @@ class CBCTP:
     def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
         """(E, N, 2) actions of the current actor plus OU noise, clipped to [-1, 1], and no
         evader actions (the environment's evader plays)."""
-        actions = self.policy.act(obs, info)
-        if self.demonstrating():
-            actions = self.demo(obs, info)
+        actions = self.policy.act(obs, info)  # also TP Net's prediction, stored by record()
+        if self.demonstrating():  # the demonstrator plays as it would, without noise
+            return self.demo(obs, info).clamp(-1.0, 1.0), None
         if noise_scale > 0:
             actions = actions + self.noise.sample(gen, noise_scale)
         return actions.clamp(-1.0, 1.0), None

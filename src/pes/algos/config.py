@@ -153,9 +153,10 @@ class TrainConfig:
 
     # --- demonstrations (CBC-TP, CBC Net, BiCNet) ------------------------------------------------
     demo_policy: str = ""
-    """A scripted pursuer policy (``pid-pf``) that plays, with the exploration noise, the first
-    ``demo_transitions`` transitions of a run ("" = none); its transitions are marked in the
-    replay buffer as demonstrations (as DDPGfD, Vecerik et al. 2017)."""
+    """A scripted pursuer policy (``pid-pf``) that plays the first ``demo_transitions``
+    transitions of a run ("" = none), without exploration noise (OU noise of scale 0.2 takes
+    PID(PF) from 52 % to 3 % captures against the evader capped at 8 m/s); its transitions are
+    marked in the replay buffer as demonstrations (as DDPGfD, Vecerik et al. 2017)."""
     demo_transitions: int = 0
     """Transitions the demonstration policy plays (at most ``buffer_size``)."""
     bc_weight: float = 0.0
