@@ -103,6 +103,8 @@ RESUMABLE_CHANGES = {
     "compile_env",
     "tensorboard",
     "init_from",
+    "curriculum_step",
+    "curriculum_success",
 }
 
 
