@@ -171,6 +171,23 @@ def test_evader_speed_curriculum_rises_with_success(tmp_path):
     col = rows[0].split(",").index("evader_speed")
     speeds = [float(r.split(",")[col]) for r in rows[1:]]
     assert speeds == [9.0, 10.0, 11.0, 11.0, 11.0]
+    # Rows that PID(PF) demonstrated (the first two vector steps, 16 one-step episodes) measure
+    # the demonstrator: they leave the cap where it is.
+    _tiny(
+        tmp_path / "demo",
+        episodes=40,
+        log_every=8,
+        eval_episodes=0,
+        curriculum_speed=9.0,
+        curriculum_step=1.0,
+        curriculum_success=0.5,
+        demo_policy="pid-pf",
+        demo_transitions=16,
+        env=dict(easy, evader_max_speed=11.0),
+    )
+    rows = (tmp_path / "demo" / "progress.csv").read_text().splitlines()
+    speeds = [float(r.split(",")[col]) for r in rows[1:]]
+    assert speeds == [9.0, 9.0, 9.0, 10.0, 11.0]
     for bad in (dict(curriculum_speed=13.0), dict(curriculum_step=0.0)):
         with pytest.raises(ConfigError, match="curriculum"):
             build_train_config("cbc-tp", "tiny", bad)
@@ -246,6 +263,46 @@ def test_demonstrations_fill_the_buffer_and_are_cloned():
         build_train_config("maddpg", "tiny", {"demo_policy": "pid-pf"})
     with pytest.raises(ConfigError, match="demo_transitions"):
         build_train_config("cbc-tp", "tiny", {"demo_transitions": 10**9})
+
+
+def test_demonstrations_end_when_the_buffer_is_full():
+    """demo_transitions = buffer_size, which whole steps of 8 environments cannot fill exactly
+    (1004 -> 125 steps = 1000 transitions): the demonstrator still hands over."""
+    values = dict(FAST, demo_policy="pid-pf", demo_transitions=1004, buffer_size=1004)
+    cfg = build_train_config("cbc-tp", "tiny", values)
+    env_cfg = cfg.env_config()
+    learner = CBCTP(cfg, env_cfg, torch.device("cpu"))
+    env = pes.make_env(env_cfg, num_envs=cfg.num_envs, seed=0)
+    obs, info = env.reset()
+    gen = torch.Generator().manual_seed(0)
+    learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool))
+    for _ in range(125):
+        assert learner.demonstrating()
+        actions, _ = learner.act(obs, info, 0.0, gen)
+        obs2, reward, term, trunc, info2 = env.step(actions)
+        learner.record(info, actions, None, reward, term, info2)
+        obs, info = obs2, info2
+    assert len(learner.buffer) == 1000 and not learner.demonstrating()
+
+
+def test_greedy_envs_act_without_noise():
+    """The last greedy_envs share of the environments plays the actor's own action; the others
+    add OU noise."""
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, greedy_envs=0.25))  # 2 of 8 envs
+    env_cfg = cfg.env_config()
+    learner = CBCTP(cfg, env_cfg, torch.device("cpu"))
+    env = pes.make_env(env_cfg, num_envs=cfg.num_envs, seed=0)
+    obs, info = env.reset()
+    gen = torch.Generator().manual_seed(0)
+    noisy, _ = learner.act(obs, info, 0.5, gen)
+    with torch.no_grad():
+        clean = learner.policy.act(obs, info).clamp(-1.0, 1.0)
+    torch.testing.assert_close(noisy[6:], clean[6:])
+    assert float((noisy[:6] - clean[:6]).abs().min(-1).values.mean()) > 0.0
+    with pytest.raises(ConfigError, match="greedy_envs"):
+        build_train_config("cbc-tp", "tiny", {"greedy_envs": 1.5})
+    with pytest.raises(ConfigError, match="greedy_envs"):
+        build_train_config("ppo", "tiny", {"greedy_envs": 0.5})
 
 
 def test_mismatched_checkpoint_is_refused(tmp_path, capsys):

@@ -173,6 +173,10 @@ class CBCTP:
             fields["demo"] = ((), torch.bool)
         self.buffer = ReplayBuffer(cfg.buffer_size, cfg.num_envs, fields, device)
         self.noise = OUNoise((cfg.num_envs, self.n, 2), cfg.noise_theta, 1.0, device=device)
+        # (E, 1, 1) 1 for the environments that explore, 0 for the last greedy_envs share
+        greedy = round(cfg.greedy_envs * cfg.num_envs)
+        self.explore = (torch.arange(cfg.num_envs, device=device) < cfg.num_envs - greedy).float()
+        self.explore = self.explore[:, None, None]
         self.updates = 0
 
     @staticmethod
@@ -202,13 +206,14 @@ class CBCTP:
     # --- acting ----------------------------------------------------------------------------------
     @torch.no_grad()
     def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
-        """(E, N, 2) actions of the current actor plus OU noise, clipped to [-1, 1], and no
-        evader actions (the environment's evader plays)."""
+        """(E, N, 2) actions of the current actor plus OU noise (none in the ``greedy_envs``
+        share of the environments), clipped to [-1, 1], and no evader actions (the
+        environment's evader plays)."""
         actions = self.policy.act(obs, info)  # also TP Net's prediction, stored by record()
         if self.demonstrating():  # the demonstrator plays as it would, without noise
             return self.demo(obs, info).clamp(-1.0, 1.0), None
         if noise_scale > 0:
-            actions = actions + self.noise.sample(gen, noise_scale)
+            actions = actions + self.noise.sample(gen, noise_scale) * self.explore
         return actions.clamp(-1.0, 1.0), None
 
     def record(
@@ -234,7 +239,10 @@ class CBCTP:
 
     def demonstrating(self) -> bool:
         """Whether the demonstration policy plays the next step (``demo_transitions``)."""
-        return self.demo is not None and len(self.buffer) < self.cfg.demo_transitions
+        # The buffer holds whole steps of all environments: its capacity may fall a few
+        # transitions short of buffer_size, and so of demo_transitions.
+        capacity = self.buffer.rows * self.buffer.num_envs
+        return self.demo is not None and len(self.buffer) < min(self.cfg.demo_transitions, capacity)
 
     def episode_reset(self, done: Tensor) -> None:
         self.noise.reset(done)
@@ -287,6 +295,16 @@ class CBCTP:
         # policy gradient, as FACMAC's), N times the gradient samples for one critic pass.
         obs, mask = pursuer_obs(state, alive)
         rel = None if pred is None else relative_prediction(pred, state, n)
+        if self.demonstrating() and cfg.bc_weight > 0:
+            # While the demonstrator still plays, the critic is too young to follow: the actor
+            # learns by behaviour cloning alone, every alive pursuer of every sample.
+            pre = self.actor.pre_activation(obs, mask, rel)
+            bc = masked_mean(((torch.tanh(pre) - action) ** 2).sum(-1), alive)
+            reg = masked_mean((pre**2).sum(-1), alive)
+            stats["bc_share"] = 1.0
+            return self.finish_update(
+                cfg.bc_weight * bc + cfg.action_reg * reg, critic_loss, q, alive, stats
+            )
         if cfg.actor_gradient == "all":
             pre = self.actor.pre_activation(obs, mask, rel)  # (B, N, 2)
             new_action = torch.where(alive.unsqueeze(-1), torch.tanh(pre), action)
@@ -310,8 +328,12 @@ class CBCTP:
         reg = masked_mean((pre**2).sum(-1), acting)
         actor_loss = -masked_mean(q_pi, acting) + cfg.action_reg * reg
         if self.demo is not None and cfg.bc_weight > 0:
-            # Behaviour cloning on the demonstrations; the other pursuers' actions are the
-            # stored ones, so they add nothing.
+            # Behaviour cloning on the demonstrations, with the Q term divided by the batch's
+            # mean |Q| (TD3+BC, Fujimoto & Gu 2021) so that bc_weight weighs the same whatever
+            # the reward's scale; the other pursuers' actions are the stored ones, so they
+            # add nothing.
+            scale = masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
+            actor_loss = -masked_mean(q_pi, acting) / scale + cfg.action_reg * reg
             demo = buf.get("demo", row, env).unsqueeze(-1) & acting
             bc = ((new_action - action) ** 2).sum(-1)
             actor_loss = actor_loss + cfg.bc_weight * (bc * demo).sum() / len(row)

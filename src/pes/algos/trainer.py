@@ -286,6 +286,9 @@ def train(
     learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=device))
     logger = RunLogger(out, cfg.tensorboard, resume)
     window: dict[str, list] = {"success": [], "steps": [], "reward": [], "crashes": []}
+    # Whether a demonstration policy (CBC-TP's demo_policy) played during this log row.
+    demonstrating = getattr(learner, "demonstrating", lambda: False)
+    demo_in_row = False
     stats_sum: dict[str, float] = {}
     stats_count: dict[str, int] = {}
     reward_sum = torch.zeros(cfg.num_envs, device=device)
@@ -307,6 +310,7 @@ def train(
     try:
         while prog.episodes < cfg.episodes:
             scale = noise_scale(cfg, prog.episodes)
+            demo_in_row |= demonstrating()
             actions, evader_actions = learner.act(obs, info, scale, gen)
             alive = info["obs_mask"][:, :, 0].float()
             obs2, reward, terminated, truncated, info2 = env.step(actions, evader_actions)
@@ -363,12 +367,15 @@ def train(
                     save_policy(out / "snapshots" / f"ep{prog.episodes:06d}.pt", meta())
                 score = learner.score(row["success_rate"], row["episode_steps"])
                 # Ties go to the later row: a run that never captures keeps its latest policy,
-                # not its first, barely trained one.
-                if score >= prog.best_score:
+                # not its first, barely trained one. A row that the demonstration policy
+                # played (partly) measures the demonstrator, not the learner: it neither
+                # counts for best_policy.pt nor raises the curriculum.
+                if score >= prog.best_score and not demo_in_row:
                     prog.best_score = score
                     save_policy(out / "best_policy.pt", {**meta(), "best_at": prog.episodes})
                 if (
                     0 < prog.evader_speed < top_speed
+                    and not demo_in_row
                     and row["success_rate"] >= cfg.curriculum_success
                 ):
                     # Harder from the next step on; the best policy is then sought afresh at
@@ -383,6 +390,7 @@ def train(
                     **({"evader": f"{prog.evader_speed:g}m/s"} if prog.evader_speed else {}),
                 )
                 window = {k: [] for k in window}
+                demo_in_row = False
                 stats_sum, stats_count = {}, {}
                 row_start = (now, prog.env_steps, prog.updates)
                 next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
