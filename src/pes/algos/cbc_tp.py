@@ -326,14 +326,15 @@ class CBCTP:
         # MADDPG's regulariser: the squared pre-activation, so that the tanh never saturates
         # (a penalty on the action itself vanishes there).
         reg = masked_mean((pre**2).sum(-1), acting)
-        actor_loss = -masked_mean(q_pi, acting) + cfg.action_reg * reg
+        q_term = masked_mean(q_pi, acting)
         if self.demo is not None and cfg.bc_weight > 0:
-            # Behaviour cloning on the demonstrations, with the Q term divided by the batch's
-            # mean |Q| (TD3+BC, Fujimoto & Gu 2021) so that bc_weight weighs the same whatever
-            # the reward's scale; the other pursuers' actions are the stored ones, so they
-            # add nothing.
-            scale = masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
-            actor_loss = -masked_mean(q_pi, acting) / scale + cfg.action_reg * reg
+            # TD3+BC (Fujimoto & Gu 2021): the Q term divided by the batch's mean |Q|, so that
+            # bc_weight weighs the same whatever the reward's scale.
+            q_term = q_term / masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
+        actor_loss = -q_term + cfg.action_reg * reg
+        if self.demo is not None and cfg.bc_weight > 0:
+            # Behaviour cloning on the demonstrations; the other pursuers' actions are the
+            # stored ones, so they add nothing.
             demo = buf.get("demo", row, env).unsqueeze(-1) & acting
             bc = ((new_action - action) ** 2).sum(-1)
             actor_loss = actor_loss + cfg.bc_weight * (bc * demo).sum() / len(row)

@@ -108,9 +108,9 @@ class TrainConfig:
     """Fraction of the episodes over which the noise scale decays."""
     greedy_envs: float = 0.0
     """Share (0-1) of the environments that act without exploration noise (the OU-noise pursuer
-    learners: CBC-TP, CBC Net, MADDPG, DDPG, BiCNet): their
-    episodes show the current policy's own captures, which noise destroys (OU noise of scale
-    0.2 takes PID(PF) from 52 % to 3 % captures against the evader capped at 8 m/s)."""
+    learners: CBC-TP, CBC Net, MADDPG, DDPG, BiCNet): their episodes show the current policy's
+    own captures, which noise destroys (OU noise of scale 0.2 takes PID(PF) from 52 % to 3 %
+    captures against the evader capped at 8 m/s)."""
 
     # --- PPO (on-policy; docs/algorithms/ppo.md) ---------------------------------------------
     rollout_steps: int = 128
