@@ -6,7 +6,9 @@ Plays ``--episodes`` evaluation episodes (disturbance on, crashes disable, the s
 evader) per policy and prints, for steps 0-99, 100-299 and 300-499 of the episodes still
 running: the mean speed of the alive pursuers (m/s), their mean distance to the evader (m),
 the distance of the nearest one (m) and the mean distance of the pursuers from their own
-centroid (m, how spread out the swarm is).
+centroid (m, how spread out the swarm is); then, per policy, the crashes per episode and the
+median step, distance to the evader (m) and speed just before (m/s) of the crashes.
+``--evader-speed`` caps the evader's speed (m/s; default: the scenario's 12).
 """
 
 from __future__ import annotations
@@ -27,8 +29,10 @@ from pes.sim.env import make_env  # noqa: E402
 WINDOWS = ((0, 100), (100, 300), (300, 500))
 
 
-def measure(name: str, episodes: int, seed: int) -> dict[str, list[float]]:
-    cfg = EnvConfig(disturbance=True, crash_mode="disable", evader_policy="ddpg")
+def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[str, list[float]]:
+    cfg = EnvConfig(
+        disturbance=True, crash_mode="disable", evader_policy="ddpg", evader_max_speed=evader_speed
+    )
     env = make_env(cfg, num_envs=episodes, seed=seed)
     policy = make_policy(name, cfg, seed=seed)
     obs, info = env.reset(seed=seed)
@@ -36,9 +40,14 @@ def measure(name: str, episodes: int, seed: int) -> dict[str, list[float]]:
     sums = {k: torch.zeros(len(WINDOWS)) for k in ("speed", "dist", "nearest", "spread")}
     counts = torch.zeros(len(WINDOWS))
     n = cfg.num_pursuers
+    crashes = []  # (step, distance to the evader m, speed before m/s) of every crash
+    speed = torch.zeros(episodes, n)
     with torch.no_grad():
         for t in range(cfg.max_steps):
             obs, _, terminated, truncated, info = env.step(policy(obs, info))
+            crashed = info["crashed"] & running[:, None]
+            for e, j in crashed.nonzero().tolist():
+                crashes.append((t, float(info["distances"][e, j]), float(speed[e, j])))
             state = info["final_state"]  # (E, N+1, 8), normalised
             alive = info["final_obs_mask"][:, :, 0] & running[:, None]
             w = next(i for i, (a, b) in enumerate(WINDOWS) if a <= t < b)
@@ -58,7 +67,10 @@ def measure(name: str, episodes: int, seed: int) -> dict[str, list[float]]:
             running &= ~(terminated | truncated)
             if not running.any():
                 break
-    return {k: (v / counts.clamp(min=1)).tolist() for k, v in sums.items()}
+    out = {k: (v / counts.clamp(min=1)).tolist() for k, v in sums.items()}
+    table = torch.tensor(crashes).reshape(-1, 3)
+    out["crashes"] = [len(crashes) / episodes, *table.median(0).values.tolist()] if crashes else []
+    return out
 
 
 def main() -> None:
@@ -66,18 +78,27 @@ def main() -> None:
     parser.add_argument("policies", nargs="+")
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--evader-speed", type=float, default=12.0)
     args = parser.parse_args()
     torch.set_num_threads(1)
     print("| policy | steps | speed (m/s) | mean distance (m) | nearest (m) | spread (m) |")
     print("| --- | --- | --- | --- | --- | --- |")
+    crash_rows = []
     for name in args.policies:
-        stats = measure(name, args.episodes, args.seed)
+        stats = measure(name, args.episodes, args.seed, args.evader_speed)
+        crash_rows.append((name, stats["crashes"]))
         for i, (a, b) in enumerate(WINDOWS):
             print(
                 f"| {name} | {a}-{b - 1} | {stats['speed'][i]:.1f} | {stats['dist'][i]:.1f} "
                 f"| {stats['nearest'][i]:.1f} | {stats['spread'][i]:.1f} |",
                 flush=True,
             )
+    print()
+    print("| policy | crashes / episode | median step | distance to the evader (m) | speed (m/s) |")
+    print("| --- | --- | --- | --- | --- |")
+    for name, row in crash_rows:
+        cells = " | ".join(f"{x:.1f}" for x in row) if row else "0.0 | - | - | -"
+        print(f"| {name} | {cells} |")
 
 
 if __name__ == "__main__":
