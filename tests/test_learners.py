@@ -205,6 +205,13 @@ def test_init_from_a_checkpoint_copies_every_network(tmp_path):
     for name, module in learner.modules().items():
         for key, value in module.state_dict().items():
             assert torch.equal(value, source[name][key]), (name, key)
+    # A run started from it records which checkpoint, with its counters.
+    summary = _tiny(tmp_path / "dst", episodes=8, eval_episodes=0, init_from=str(tmp_path / "src"))
+    source_summary = json.loads((tmp_path / "src" / "summary.json").read_text())
+    record = json.loads((tmp_path / "dst" / "init_from.json").read_text())
+    assert record["path"] == str((tmp_path / "src" / "checkpoint.pt").resolve())
+    assert record["progress"]["episodes"] == source_summary["episodes"]
+    assert summary["episodes"] >= 8
     other = build_train_config("maddpg", "tiny", dict(FAST, init_from=str(tmp_path / "src")))
     with pytest.raises(CheckpointError, match="holds a cbc-tp run"):
         train(other, tmp_path / "other", progress=False)

@@ -15,6 +15,8 @@ A run lives in one folder::
                          (pursuers: highest success rate, then fewest steps; the evader:
                          the lowest pursuer success rate, then the most steps)
     OUT/summary.json     counters and the evaluation of policy.pt and best_policy.pt
+    OUT/init_from.json   with ``init_from``: the checkpoint the networks started from and its
+                         counters
 
 ``train(cfg, out, resume=True)`` continues from ``checkpoint.pt``: networks, optimisers, replay
 buffer, noise, RNG states and counters come back; environments start fresh episodes (the
@@ -224,8 +226,9 @@ def train(
         prog = Progress(**ckpt["progress"])
         learner.updates = prog.updates
     else:
-        if cfg.init_from:
-            init_networks(learner, cfg)
+        if cfg.init_from:  # record which checkpoint it was: the source run may go on
+            source = init_networks(learner, cfg)
+            (out / "init_from.json").write_text(json.dumps(source, indent=2) + "\n")
         prog.evader_speed = cfg.curriculum_speed
     save_yaml(cfg, out / "config.yaml")
 
@@ -434,9 +437,10 @@ def train(
     return summary
 
 
-def init_networks(learner, cfg: TrainConfig) -> None:
+def init_networks(learner, cfg: TrainConfig) -> dict[str, Any]:
     """Load every network of ``learner`` (target networks included) from the checkpoint
-    ``cfg.init_from`` (a run folder or its ``checkpoint.pt``)."""
+    ``cfg.init_from`` (a run folder or its ``checkpoint.pt``); returns the checkpoint's path
+    and counters (episodes, env steps, updates, wall time)."""
     path = Path(cfg.init_from)
     if path.is_dir():
         path = path / "checkpoint.pt"
@@ -446,6 +450,7 @@ def init_networks(learner, cfg: TrainConfig) -> None:
             f"init_from: '{path}' holds a {ckpt.get('algo')} run, this run trains {cfg.algo}"
         )
     load_modules(learner.modules(), ckpt["modules"], str(path))
+    return {"path": str(path.resolve()), "progress": ckpt["progress"]}
 
 
 def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: bool) -> dict:
