@@ -157,8 +157,7 @@ def test_evader_speed_curriculum_rises_with_success(tmp_path):
     """Every episode is a capture (one pursuer within 500 m for one step), so every log row
     raises the evader's cap by a step, up to the configured top speed."""
     easy = dict(max_steps=20, capture_count=1, capture_radius=500.0, capture_hold=1)
-    _tiny(
-        tmp_path / "cur",
+    run = dict(
         episodes=40,
         log_every=8,
         eval_episodes=0,
@@ -167,27 +166,18 @@ def test_evader_speed_curriculum_rises_with_success(tmp_path):
         curriculum_success=0.5,
         env=dict(easy, evader_max_speed=11.0),
     )
-    rows = (tmp_path / "cur" / "progress.csv").read_text().splitlines()
-    col = rows[0].split(",").index("evader_speed")
-    speeds = [float(r.split(",")[col]) for r in rows[1:]]
-    assert speeds == [9.0, 10.0, 11.0, 11.0, 11.0]
+
+    def speeds(out) -> list[float]:
+        rows = (out / "progress.csv").read_text().splitlines()
+        col = rows[0].split(",").index("evader_speed")
+        return [float(r.split(",")[col]) for r in rows[1:]]
+
+    _tiny(tmp_path / "cur", **run)
+    assert speeds(tmp_path / "cur") == [9.0, 10.0, 11.0, 11.0, 11.0]
     # Rows that PID(PF) demonstrated (the first two vector steps, 16 one-step episodes) measure
     # the demonstrator: they leave the cap where it is.
-    _tiny(
-        tmp_path / "demo",
-        episodes=40,
-        log_every=8,
-        eval_episodes=0,
-        curriculum_speed=9.0,
-        curriculum_step=1.0,
-        curriculum_success=0.5,
-        demo_policy="pid-pf",
-        demo_transitions=16,
-        env=dict(easy, evader_max_speed=11.0),
-    )
-    rows = (tmp_path / "demo" / "progress.csv").read_text().splitlines()
-    speeds = [float(r.split(",")[col]) for r in rows[1:]]
-    assert speeds == [9.0, 9.0, 9.0, 10.0, 11.0]
+    _tiny(tmp_path / "demo", **run, demo_policy="pid-pf", demo_transitions=16)
+    assert speeds(tmp_path / "demo") == [9.0, 9.0, 9.0, 10.0, 11.0]
     for bad in (dict(curriculum_speed=13.0), dict(curriculum_step=0.0)):
         with pytest.raises(ConfigError, match="curriculum"):
             build_train_config("cbc-tp", "tiny", bad)
