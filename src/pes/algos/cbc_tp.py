@@ -239,10 +239,10 @@ class CBCTP:
 
     def demonstrating(self) -> bool:
         """Whether the demonstration policy plays the next step (``demo_transitions``)."""
-        # The buffer holds whole steps of all environments: its capacity may fall a few
+        # The buffer's capacity is whole steps of all environments: it may fall a few
         # transitions short of buffer_size, and so of demo_transitions.
-        capacity = self.buffer.rows * self.buffer.num_envs
-        return self.demo is not None and len(self.buffer) < min(self.cfg.demo_transitions, capacity)
+        wanted = min(self.cfg.demo_transitions, self.buffer.capacity)
+        return self.demo is not None and len(self.buffer) < wanted
 
     def episode_reset(self, done: Tensor) -> None:
         self.noise.reset(done)
@@ -326,19 +326,18 @@ class CBCTP:
         # MADDPG's regulariser: the squared pre-activation, so that the tanh never saturates
         # (a penalty on the action itself vanishes there).
         reg = masked_mean((pre**2).sum(-1), acting)
-        q_term = masked_mean(q_pi, acting)
+        q_term, bc_term = masked_mean(q_pi, acting), 0.0
         if self.demo is not None and cfg.bc_weight > 0:
             # TD3+BC (Fujimoto & Gu 2021): the Q term divided by the batch's mean |Q|, so that
-            # bc_weight weighs the same whatever the reward's scale.
+            # bc_weight weighs the same whatever the reward's scale, plus behaviour cloning on
+            # the demonstrations (the other pursuers' actions are the stored ones, so they add
+            # nothing).
             q_term = q_term / masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
-        actor_loss = -q_term + cfg.action_reg * reg
-        if self.demo is not None and cfg.bc_weight > 0:
-            # Behaviour cloning on the demonstrations; the other pursuers' actions are the
-            # stored ones, so they add nothing.
             demo = buf.get("demo", row, env).unsqueeze(-1) & acting
             bc = ((new_action - action) ** 2).sum(-1)
-            actor_loss = actor_loss + cfg.bc_weight * (bc * demo).sum() / len(row)
+            bc_term = cfg.bc_weight * (bc * demo).sum() / len(row)
             stats["bc_share"] = float(demo.sum()) / max(float(acting.sum()), 1.0)
+        actor_loss = -q_term + cfg.action_reg * reg + bc_term
         return self.finish_update(actor_loss, critic_loss, q, alive, stats)
 
     def finish_update(
