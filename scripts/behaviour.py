@@ -7,8 +7,12 @@ evader) per policy and prints, for steps 0-99, 100-299 and 300-499 of the episod
 running: the mean speed of the alive pursuers (m/s), their mean distance to the evader (m),
 the distance of the nearest one (m) and the mean distance of the pursuers from their own
 centroid (m, how spread out the swarm is); then, per policy, the crashes per episode and the
-median step, distance to the evader (m) and speed just before (m/s) of the crashes.
-``--evader-speed`` caps the evader's speed (m/s; default: the scenario's 12).
+median step, distance to the evader (m) and speed just before (m/s) of the crashes; and, per
+policy, where the evader is: the share of steps it is slower than 4 m/s or within 1.5 m of an
+obstacle, the share of steps with at least 1 / 3 alive pursuers within 2 m and within 5 m of it,
+and its median speed (m/s) and distance to its nearest obstacle (m) ``LOOKBACK`` steps before
+each capture (a capture needs 3 pursuers within 2 m for 5 steps, so it is where the evader is
+held up). ``--evader-speed`` caps the evader's speed (m/s; default: the scenario's 12).
 """
 
 from __future__ import annotations
@@ -27,6 +31,9 @@ from pes.sim.config import EnvConfig  # noqa: E402
 from pes.sim.env import make_env  # noqa: E402
 
 WINDOWS = ((0, 100), (100, 300), (300, 500))
+LOOKBACK = 10  # steps before a capture at which the evader's speed and wall distance are read
+SLOW = 4.0  # m/s, an evader slower than this is "slow"
+NEAR_WALL = 1.5  # m, an evader closer than this to an obstacle is "at a wall"
 
 
 def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[str, list[float]]:
@@ -42,6 +49,11 @@ def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[st
     n = cfg.num_pursuers
     crashes = []  # (step, distance to the evader m, speed before m/s) of every crash
     speed = torch.zeros(episodes, n)
+    # Evader rows per step: slow, at a wall, >= 1 / >= 3 pursuers within 2 m, within 5 m.
+    evader_counts = torch.zeros(6)
+    evader_steps = 0
+    past = []  # the evader's (speed m/s, obstacle distance m) per step, (E,) each
+    at_capture = []  # (speed, obstacle distance) LOOKBACK steps before each capture
     with torch.no_grad():
         for t in range(cfg.max_steps):
             obs, _, terminated, truncated, info = env.step(policy(obs, info))
@@ -54,6 +66,27 @@ def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[st
             pos = state[:, :n, :2] * cfg.arena_width
             speed = state[:, :n, 2:4].norm(dim=-1) * cfg.pursuer_max_speed
             dist = info["distances"]
+            ev_speed = state[:, n, 2:4].norm(dim=-1) * cfg.pursuer_max_speed
+            ev_wall = state[:, n, 4:6].norm(dim=-1) * cfg.arena_width
+            past.append((ev_speed, ev_wall))
+            near2 = ((dist < 2.0) & alive).sum(-1)
+            near5 = ((dist < 5.0) & alive).sum(-1)
+            flags = torch.stack(
+                [
+                    ev_speed < SLOW,
+                    ev_wall < NEAR_WALL,
+                    near2 >= 1,
+                    near2 >= 3,
+                    near5 >= 1,
+                    near5 >= 3,
+                ],
+                dim=-1,
+            )
+            evader_counts += flags[running].float().sum(0)
+            evader_steps += int(running.sum())
+            then = past[max(0, t - LOOKBACK)]
+            for e in (info["success"] & running).nonzero()[:, 0].tolist():
+                at_capture.append((float(then[0][e]), float(then[1][e])))
             a = alive.float()
             k = a.sum(-1).clamp(min=1)
             centroid = (pos * a[..., None]).sum(1) / k[:, None]
@@ -70,6 +103,9 @@ def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[st
     out = {k: (v / counts.clamp(min=1)).tolist() for k, v in sums.items()}
     table = torch.tensor(crashes).reshape(-1, 3)
     out["crashes"] = [len(crashes) / episodes, *table.median(0).values.tolist()] if crashes else []
+    out["evader"] = (evader_counts / max(evader_steps, 1)).tolist()
+    captured = torch.tensor(at_capture).reshape(-1, 2)
+    out["captures"] = [len(at_capture), *captured.median(0).values.tolist()] if at_capture else [0]
     return out
 
 
@@ -83,10 +119,11 @@ def main() -> None:
     torch.set_num_threads(1)
     print("| policy | steps | speed (m/s) | mean distance (m) | nearest (m) | spread (m) |")
     print("| --- | --- | --- | --- | --- | --- |")
-    crash_rows = []
+    crash_rows, evader_rows = [], []
     for name in args.policies:
         stats = measure(name, args.episodes, args.seed, args.evader_speed)
         crash_rows.append((name, stats["crashes"]))
+        evader_rows.append((name, stats["evader"], stats["captures"]))
         for i, (a, b) in enumerate(WINDOWS):
             print(
                 f"| {name} | {a}-{b - 1} | {stats['speed'][i]:.1f} | {stats['dist'][i]:.1f} "
@@ -99,6 +136,20 @@ def main() -> None:
     for name, row in crash_rows:
         cells = " | ".join(f"{x:.1f}" for x in row) if row else "0.0 | - | - | -"
         print(f"| {name} | {cells} |")
+    print()
+    print(
+        f"| policy | evader < {SLOW:g} m/s | evader < {NEAR_WALL:g} m from an obstacle "
+        "| >= 1 / >= 3 pursuers within 2 m | >= 1 / >= 3 within 5 m | captures "
+        f"| evader speed (m/s) / obstacle distance (m) {LOOKBACK} steps before a capture |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for name, shares, captures in evader_rows:
+        pct = [f"{100 * x:.1f} %" for x in shares]
+        before = f"{captures[1]:.1f} / {captures[2]:.1f}" if captures[0] else "-"
+        print(
+            f"| {name} | {pct[0]} | {pct[1]} | {pct[2]} / {pct[3]} | {pct[4]} / {pct[5]} "
+            f"| {captures[0]} | {before} |"
+        )
 
 
 if __name__ == "__main__":
