@@ -4,9 +4,11 @@
         --command "pes train --algo evader-ddpg ..."
     python scripts/ship_model.py cbc-tp runs/cbc_tp/best_policy.pt --command "pes train ..."
 
-Copies the policy file to ``src/pes/models/``, evaluates it over ``--episodes`` episodes with
-the paper's protocol (disturbance on, ``crash_mode="disable"``), and writes the model card
-(``src/pes/models/NAME.md``) and the raw numbers (``results/shipped_NAME.json``):
+Copies the policy file to ``src/pes/models/`` (given a training checkpoint, writes a policy
+file of its acting networks, the actor and TP Net, with the checkpoint's counters), evaluates
+it over ``--episodes`` episodes with the paper's protocol (disturbance on,
+``crash_mode="disable"``), and writes the model card (``src/pes/models/NAME.md``) and the raw
+numbers (``results/shipped_NAME.json``):
 
 * the evader: PID(PF) pursuers against it, beside PID(PF) against the scripted ``flee`` evader;
 * the swarm: against the shipped evader with 0, 1 and 2 pursuers damaged (Table VI), and
@@ -27,7 +29,14 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: E402
+from pes.algos.io import (  # noqa: E402
+    CHECKPOINT_FORMAT,
+    MODELS_DIR,
+    POLICY_FORMAT,
+    SHIPPED,
+    load_file,
+    save_atomic,
+)
 from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
 from pes.policies import PIDPotentialField  # noqa: E402
@@ -35,6 +44,33 @@ from pes.sim.bench import machine_info  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
 
 PAPER_TABLE_VI = {0: (98.8, 132), 1: (95.6, 212), 2: (86.7, 308)}
+
+
+ACTING_MODULES = ("actor", "tp")  # what every learner's policy_modules() returns, at most
+
+
+def ship_file(source: str, target: Path) -> None:
+    """Copy a policy file to ``target``; of a checkpoint, keep only the acting networks."""
+    obj = load_file(source, (POLICY_FORMAT, CHECKPOINT_FORMAT))
+    if obj["format"] == POLICY_FORMAT:
+        shutil.copyfile(source, target)
+        return
+    progress = obj["progress"]
+    meta = {k: progress[k] for k in ("episodes", "env_steps", "updates") if k in progress}
+    meta["wall_s"] = round(float(progress.get("wall_s", 0.0)), 1)
+    meta["from_checkpoint"] = True
+    save_atomic(
+        {
+            "format": POLICY_FORMAT,
+            "version": obj["version"],
+            "algo": obj["algo"],
+            "train_config": obj["train_config"],
+            "env_config": obj["env_config"],
+            "policy": {k: v for k, v in obj["modules"].items() if k in ACTING_MODULES},
+            "meta": meta,
+        },
+        target,
+    )
 
 
 def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:
@@ -55,9 +91,9 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(2)
 
-    info = describe(args.policy)
     target = MODELS_DIR / SHIPPED[args.name]
-    shutil.copyfile(args.policy, target)
+    ship_file(args.policy, target)
+    info = describe(target)
     base = EnvConfig(disturbance=True, crash_mode="disable")
     evals: dict[str, dict] = {}
     if args.name == "evader-ddpg":
