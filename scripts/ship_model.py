@@ -35,7 +35,7 @@ from pes.algos.io import (  # noqa: E402
     POLICY_FORMAT,
     SHIPPED,
     load_file,
-    save_atomic,
+    save_policy_file,
 )
 from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
@@ -59,18 +59,8 @@ def ship_file(source: str, target: Path) -> None:
     meta = {k: progress[k] for k in ("episodes", "env_steps", "updates") if k in progress}
     meta["wall_s"] = round(float(progress.get("wall_s", 0.0)), 1)
     meta["from_checkpoint"] = True
-    save_atomic(
-        {
-            "format": POLICY_FORMAT,
-            "version": obj["version"],
-            "algo": obj["algo"],
-            "train_config": obj["train_config"],
-            "env_config": obj["env_config"],
-            "policy": {k: v for k, v in obj["modules"].items() if k in ACTING_MODULES},
-            "meta": meta,
-        },
-        target,
-    )
+    policy = {k: v for k, v in obj["modules"].items() if k in ACTING_MODULES}
+    save_policy_file(target, obj["algo"], obj["train_config"], obj["env_config"], policy, meta)
 
 
 def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:

@@ -51,6 +51,31 @@ def save_atomic(obj: dict[str, Any], path: str | Path) -> None:
         pass
 
 
+def save_policy_file(
+    path: str | Path,
+    algo: str,
+    train_config: dict[str, Any],
+    env_config: dict[str, Any],
+    policy: dict[str, Any],
+    meta: dict[str, Any],
+) -> None:
+    """Write a policy file atomically: the acting networks' state dicts (``policy``, e.g.
+    ``{"actor": ..., "tp": ...}``), the configurations (as plain dicts) that rebuild them, and
+    ``meta`` (counters such as episodes, env steps, updates, wall time in s)."""
+    save_atomic(
+        {
+            "format": POLICY_FORMAT,
+            "version": VERSION,
+            "algo": algo,
+            "train_config": train_config,
+            "env_config": env_config,
+            "policy": policy,
+            "meta": meta,
+        },
+        path,
+    )
+
+
 def load_file(path: str | Path, expected: str | tuple[str, ...]) -> dict[str, Any]:
     """Read a checkpoint or policy file, checking its format; raise CheckpointError otherwise."""
     path = Path(path)

@@ -40,11 +40,11 @@ from pes.algos import ALGOS, PURSUER_ALGOS
 from pes.algos.config import TrainConfig
 from pes.algos.io import (
     CHECKPOINT_FORMAT,
-    POLICY_FORMAT,
     VERSION,
     load_file,
     load_modules,
     save_atomic,
+    save_policy_file,
 )
 from pes.config import save_yaml, to_dict
 from pes.errors import CheckpointError, ConfigError
@@ -261,18 +261,7 @@ def train(
 
     def save_policy(path: Path, info: dict[str, Any]) -> None:
         policy = {k: m.state_dict() for k, m in learner.policy_modules().items()}
-        save_atomic(
-            {
-                "format": POLICY_FORMAT,
-                "version": VERSION,
-                "algo": cfg.algo,
-                "train_config": to_dict(cfg),
-                "env_config": to_dict(env_cfg),
-                "policy": policy,
-                "meta": info,
-            },
-            path,
-        )
+        save_policy_file(path, cfg.algo, to_dict(cfg), to_dict(env_cfg), policy, info)
 
     # Each (re)start plays fresh episodes: seed by the episodes already played.
     env = make_env(
@@ -408,7 +397,6 @@ def train(
         logger.close()
     checkpoint()
 
-    policy = {k: m.state_dict() for k, m in learner.policy_modules().items()}
     meta = {
         "episodes": prog.episodes,
         "env_steps": prog.env_steps,
@@ -418,18 +406,7 @@ def train(
         "stopped_by": stopped_by,
         "torch": str(torch.__version__),
     }
-    save_atomic(
-        {
-            "format": POLICY_FORMAT,
-            "version": VERSION,
-            "algo": cfg.algo,
-            "train_config": to_dict(cfg),
-            "env_config": to_dict(env_cfg),
-            "policy": policy,
-            "meta": meta,
-        },
-        out / "policy.pt",
-    )
+    save_policy(out / "policy.pt", meta)
     summary: dict[str, Any] = {"algo": cfg.algo, "out": str(out), **meta}
     if cfg.eval_episodes > 0:
         summary["eval"] = evaluate_run(out / "policy.pt", cfg, cfg.eval_episodes, progress)
