@@ -217,3 +217,18 @@ def test_every_command_has_help():
             timeout=120,
         )
         assert proc.returncode == 0 and "usage: pes" in proc.stdout
+
+
+def test_closed_stdout_is_not_a_traceback():
+    """``pes eval --json | head`` when head has gone: exit as SIGPIPE would, no traceback."""
+    argv = ["eval", "--policy", "random", "--episodes", "2", "--num-envs", "2", "--json"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pes.cli", *argv, "--set", "max_steps=5"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    proc.stdout.close()  # the reader goes away before the command prints
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 141, err
+    assert "Traceback" not in err and "BrokenPipeError" not in err

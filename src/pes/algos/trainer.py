@@ -244,6 +244,7 @@ def train(
             "noise": learner.noise.state_dict() if learner.noise is not None else {},
             "rng": _rng_state(gen),
             "progress": vars(prog).copy(),
+            "torch": str(torch.__version__),
         }
         if cfg.checkpoint_buffer:
             payload["buffer"] = learner.buffer.state_dict()
@@ -397,17 +398,9 @@ def train(
         logger.close()
     checkpoint()
 
-    meta = {
-        "episodes": prog.episodes,
-        "env_steps": prog.env_steps,
-        "updates": prog.updates,
-        "wall_s": round(prog.wall_s, 1),
-        "seed": cfg.seed,
-        "stopped_by": stopped_by,
-        "torch": str(torch.__version__),
-    }
-    save_policy(out / "policy.pt", meta)
-    summary: dict[str, Any] = {"algo": cfg.algo, "out": str(out), **meta}
+    final = {**meta(), "stopped_by": stopped_by}
+    save_policy(out / "policy.pt", final)
+    summary: dict[str, Any] = {"algo": cfg.algo, "out": str(out), **final}
     if cfg.eval_episodes > 0:
         summary["eval"] = evaluate_run(out / "policy.pt", cfg, cfg.eval_episodes, progress)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -1,0 +1,70 @@
+"""The maintenance scripts under scripts/ that pick and ship trained policies."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import torch
+
+from pes.algos.config import build_train_config
+from pes.algos.io import POLICY_FORMAT
+from pes.algos.policy import load_pursuer_policy
+from pes.algos.trainer import train
+from pes.sim.config import EnvConfig
+from tests.learning import FAST
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+
+def _script(name: str):
+    spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _tiny_run(out: Path, **values) -> None:
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, episodes=16, eval_episodes=0, **values))
+    train(cfg, out, progress=False)
+
+
+def test_ship_file_of_a_checkpoint_keeps_the_acting_networks(tmp_path):
+    _tiny_run(tmp_path / "run", seed=3)
+    target = tmp_path / "shipped.pt"
+    _script("ship_model").ship_file(str(tmp_path / "run" / "checkpoint.pt"), target)
+    obj = torch.load(target, weights_only=True)
+    assert obj["format"] == POLICY_FORMAT and set(obj["policy"]) == {"actor", "tp"}
+    meta = obj["meta"]
+    assert meta["from_checkpoint"] and meta["seed"] == 3 and meta["episodes"] >= 16
+    assert meta["torch"] == str(torch.__version__)
+    policy, cfg = load_pursuer_policy(target, EnvConfig())
+    assert cfg.seed == 3
+
+
+def test_pick_swarm_screens_snapshots_and_confirms_the_best(tmp_path):
+    _tiny_run(tmp_path / "run", snapshots=True, log_every=8)
+    snaps = sorted((tmp_path / "run" / "snapshots").glob("ep*.pt"))
+    assert len(snaps) >= 2
+    out = tmp_path / "pick.json"
+    argv = [sys.executable, str(SCRIPTS / "pick_swarm.py"), str(tmp_path / "run")]
+    small = ["--screen", "2", "--episodes", "2", "--num-envs", "2", "--top", "2"]
+    proc = subprocess.run(
+        [*argv, *small, "--out", str(out)], capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(out.read_text())
+    screened = [c["policy"] for c in report["candidates"]]
+    assert screened == [str(p) for p in snaps] + [str(tmp_path / "run" / "policy.pt")]
+    confirmed = [c for c in report["candidates"] if "confirm" in c]
+    assert len(confirmed) == 2 and report["chosen"] in [c["policy"] for c in confirmed]
+    assert report["protocol"]["screen"]["seed"] != 0
+    assert report["protocol"]["confirm"]["seed"] != report["protocol"]["screen"]["seed"]
+    # picking on the reporting seed is refused
+    proc = subprocess.run(
+        [*argv, "--seed", "0", "--out", str(out)], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode != 0 and "seed 0" in proc.stderr
