@@ -58,7 +58,7 @@ def ship_file(source: str, target: Path) -> None:
     progress = obj["progress"]
     meta = {k: progress[k] for k in ("episodes", "env_steps", "updates") if k in progress}
     meta["wall_s"] = round(float(progress.get("wall_s", 0.0)), 1)
-    meta["seed"] = obj["train_config"].get("seed", 0)
+    meta["seed"] = obj["train_config"]["seed"]
     meta["torch"] = str(obj.get("torch", "unknown"))  # the torch that wrote the checkpoint
     meta["from_checkpoint"] = True
     policy = {k: v for k, v in obj["modules"].items() if k in ACTING_MODULES}
