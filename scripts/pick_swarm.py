@@ -45,7 +45,7 @@ def candidates(run: Path, every: int, extra: list[str]) -> list[tuple[str, int |
     """(path, training episode or None) of every policy to screen, in training order."""
     snaps = sorted((run / "snapshots").glob("ep*.pt"), key=lambda p: int(p.stem[2:]))
     out: list[tuple[str, int | None]] = [(str(p), int(p.stem[2:])) for p in snaps[::every]]
-    if snaps and (every > 1) and (len(snaps) - 1) % every:
+    if snaps and (len(snaps) - 1) % every:
         out.append((str(snaps[-1]), int(snaps[-1].stem[2:])))  # always the last snapshot
     if (run / "policy.pt").exists():
         out.append((str(run / "policy.pt"), None))

@@ -41,7 +41,7 @@ def test_ship_file_of_a_checkpoint_keeps_the_acting_networks(tmp_path):
     meta = obj["meta"]
     assert meta["from_checkpoint"] and meta["seed"] == 3 and meta["episodes"] >= 16
     assert meta["torch"] == str(torch.__version__)
-    policy, cfg = load_pursuer_policy(target, EnvConfig())
+    _, cfg = load_pursuer_policy(target, EnvConfig())
     assert cfg.seed == 3
 
 
