@@ -260,3 +260,29 @@ def test_rewards_follow_equations_8_and_9():
     assert torch.allclose(reward[0], r_co + r_self, atol=1e-4)
     assert torch.allclose(info["distances"][0], d, atol=1e-4)
     assert float(info["evader_reward"][0]) == pytest.approx(rho * 10.0, abs=1e-4)
+
+
+def test_encirclement_term_rewards_surrounding_the_evader():
+    """``encirclement_weight`` adds -w |mean unit vector from the evader to the pursuers|."""
+
+    def reward_with(x, y, weight):
+        cfg = pes.EnvConfig(
+            num_pursuers=4,
+            layout="empty",
+            evader_policy="external",
+            dynamics="point_mass",
+            encirclement_weight=weight,
+        )
+        env = pes.make_env(cfg, num_envs=1, seed=0)
+        env.reset()
+        set_vehicles(env, x=x, y=y, vx=torch.zeros(1, 5), vy=torch.zeros(1, 5))
+        _, reward, _, _, _ = env.step(torch.zeros(1, 4, 2), evader_actions=torch.zeros(1, 2))
+        return reward[0]
+
+    # Four pursuers 10 m from the evader at (50, 50): on all four sides, then all to its east.
+    around = (torch.tensor([[60.0, 40.0, 50.0, 50.0, 50.0]]), torch.tensor([[50.0, 50, 60, 40, 50]]))
+    east = (torch.tensor([[60.0, 60, 60, 60, 50]]), torch.tensor([[50.0, 50, 50, 50, 50]]))
+    for x, y in (around, east):  # weight 0 is the paper's reward
+        assert torch.allclose(reward_with(x, y, 0.0), reward_with(*around, 0.0), atol=1e-5)
+    assert torch.allclose(reward_with(*around, 2.0), reward_with(*around, 0.0), atol=1e-5)
+    assert torch.allclose(reward_with(*east, 2.0), reward_with(*east, 0.0) - 2.0, atol=1e-5)

@@ -90,6 +90,7 @@ REWARD_KEYS = (
     "softplus_k",
     "crash_reward",
     "capture_reward",
+    "encirclement_weight",
     "evader_capture_reward",
     "evader_crash_reward",
 )

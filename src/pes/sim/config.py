@@ -153,6 +153,11 @@ class EnvConfig:
     """Reward of a pursuer on a step in which it crashes."""
     capture_reward: float = 5.0
     """Reward of every alive pursuer on the step of capture."""
+    encirclement_weight: float = 0.0
+    """Not in the paper (0 = its reward): every alive pursuer gets -weight x |mean of the unit
+    vectors from the evader to the alive pursuers| each step, 0 when they surround the evader
+    evenly, -weight when all come from one side. A training aid against the pack that trails
+    the evader (docs/algorithms/cbc_tp.md)."""
     evader_capture_reward: float = -5.0
     """Reward of the evader on the step of capture."""
     evader_crash_reward: float = -2.0
@@ -198,6 +203,7 @@ class EnvConfig:
             "disturbance_scale",
             "cooperation_weight",
             "self_weight",
+            "encirclement_weight",
         ]
         for name in non_negative:
             value = getattr(self, name)
