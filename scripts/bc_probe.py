@@ -63,9 +63,7 @@ def main() -> None:
         flush=True,
     )
     learner.demonstrating = lambda: True  # the BC-only actor update from here on
-    eval_cfg = pes.EnvConfig(
-        evader_policy="ddpg", disturbance=True, crash_mode="disable", evader_max_speed=args.speed
-    )
+    eval_cfg = pes.EnvConfig().for_evaluation(evader_policy="ddpg", evader_max_speed=args.speed)
     start = time.time()
     for k in range(1, args.rounds + 1):
         for _ in range(2000):

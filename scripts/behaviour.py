@@ -37,9 +37,7 @@ NEAR_WALL = 1.5  # m, an evader closer than this to an obstacle is "at a wall"
 
 
 def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[str, list[float]]:
-    cfg = EnvConfig(
-        disturbance=True, crash_mode="disable", evader_policy="ddpg", evader_max_speed=evader_speed
-    )
+    cfg = EnvConfig().for_evaluation(evader_policy="ddpg", evader_max_speed=evader_speed)
     env = make_env(cfg, num_envs=episodes, seed=seed)
     policy = make_policy(name, cfg, seed=seed)
     obs, info = env.reset(seed=seed)

@@ -46,7 +46,7 @@ def main() -> None:
     snapshots = sorted((args.run / "snapshots").glob("ep*.pt"))
     if not snapshots:
         sys.exit(f"error: no snapshots in '{args.run / 'snapshots'}' (train with snapshots=true)")
-    base = EnvConfig(disturbance=True, crash_mode="disable", evader_policy="ddpg")
+    base = EnvConfig().for_evaluation(evader_policy="ddpg")
     pid = PIDPotentialField(base)
     rows = []
     for path in snapshots:

@@ -85,7 +85,7 @@ def main() -> None:
     todo = candidates(args.run, args.every, args.extra)
     if not todo:
         sys.exit(f"error: no snapshots or policy.pt in '{args.run}' and no --extra")
-    cfg = EnvConfig(disturbance=True, crash_mode="disable", evader_policy=args.evader)
+    cfg = EnvConfig().for_evaluation(evader_policy=args.evader)
     print(f"screening {len(todo)} policies over {args.screen} episodes each", flush=True)
     rows = []
     for path, episode in todo:

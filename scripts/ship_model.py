@@ -86,7 +86,7 @@ def main() -> None:
     target = MODELS_DIR / SHIPPED[args.name]
     ship_file(args.policy, target)
     info = describe(target)
-    base = EnvConfig(disturbance=True, crash_mode="disable")
+    base = EnvConfig().for_evaluation()
     evals: dict[str, dict] = {}
     if args.name == "evader-ddpg":
         pid = PIDPotentialField(base)

@@ -22,6 +22,16 @@ def test_defaults_are_the_paper_numbers():
     assert cfg.softplus_k == 1e-3 and cfg.safe_distance == 2.0
 
 
+def test_evaluation_protocol_resets_the_training_reward():
+    shaped = pes.EnvConfig(self_weight=5.0, encirclement_weight=0.5, num_pursuers=4)
+    protocol = shaped.for_evaluation(evader_policy="flee")
+    assert protocol.disturbance and protocol.crash_mode == "disable"
+    assert (protocol.self_weight, protocol.encirclement_weight) == (0.5, 0.0)
+    assert protocol.num_pursuers == 4 and protocol.evader_policy == "flee"
+    with pytest.raises(ConfigError):
+        shaped.for_evaluation(capture_radius=-1.0)
+
+
 def test_every_field_is_documented():
     docs = field_docs(pes.EnvConfig)
     import dataclasses

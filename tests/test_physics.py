@@ -280,7 +280,10 @@ def test_encirclement_term_rewards_surrounding_the_evader():
         return reward[0]
 
     # Four pursuers 10 m from the evader at (50, 50): on all four sides, then all to its east.
-    around = (torch.tensor([[60.0, 40.0, 50.0, 50.0, 50.0]]), torch.tensor([[50.0, 50, 60, 40, 50]]))
+    around = (
+        torch.tensor([[60.0, 40.0, 50.0, 50.0, 50.0]]),
+        torch.tensor([[50.0, 50, 60, 40, 50]]),
+    )
     east = (torch.tensor([[60.0, 60, 60, 60, 50]]), torch.tensor([[50.0, 50, 50, 50, 50]]))
     for x, y in (around, east):  # weight 0 is the paper's reward
         assert torch.allclose(reward_with(x, y, 0.0), reward_with(*around, 0.0), atol=1e-5)

@@ -66,8 +66,8 @@ def evaluate(
 
     Args:
         policy: a :class:`pes.policies.Policy`.
-        config: the scenario (use ``crash_mode="disable"`` and ``disturbance=True`` for the
-            paper's evaluation protocol).
+        config: the scenario (``config.for_evaluation()`` gives the paper's evaluation
+            protocol: disturbance on, crashes disable, the paper's reward).
         episodes: number of episodes to measure.
         num_envs: environments stepped together (at most ``episodes``).
         seed: environment ``i`` is seeded ``seed + i``.

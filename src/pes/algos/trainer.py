@@ -49,7 +49,6 @@ from pes.algos.io import (
 from pes.config import save_yaml, to_dict
 from pes.errors import CheckpointError, ConfigError
 from pes.evaluate import evaluate
-from pes.sim.config import EnvConfig
 from pes.sim.env import make_env
 
 LOG_COLUMNS = (
@@ -83,19 +82,6 @@ evader's speed cap (m/s) during the row's episodes; ``bc_share`` the share of ac
 that are demonstrations (``demo_policy``)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
-REWARD_KEYS = (
-    "cooperation_weight",
-    "self_weight",
-    "safe_distance",
-    "softplus_k",
-    "crash_reward",
-    "capture_reward",
-    "encirclement_weight",
-    "evader_capture_reward",
-    "evader_crash_reward",
-)
-"""Scenario keys that only shape the reward: evaluations reset them to the paper's values."""
-
 RESUMABLE_CHANGES = {
     "episodes",
     "time_limit",
@@ -431,9 +417,7 @@ def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: b
     from pes.policies import SCRIPTED  # noqa: PLC0415
 
     # The paper's protocol, with the paper's reward (a preset may shape the training reward).
-    defaults = EnvConfig()
-    paper_reward = {k: getattr(defaults, k) for k in REWARD_KEYS}
-    env_cfg = cfg.env_config().replace(disturbance=True, crash_mode="disable", **paper_reward)
+    env_cfg = cfg.env_config().for_evaluation()
     if cfg.algo in PURSUER_ALGOS:
         policy, _ = load_pursuer_policy(policy_path, env_cfg, cfg.device)
         opponent = env_cfg.evader_policy

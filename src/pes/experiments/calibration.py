@@ -59,7 +59,7 @@ def cases() -> dict[str, tuple[type, dict]]:
 def run(episodes: int, seed: int) -> dict:
     rows = {}
     for name, (policy_cls, overrides) in cases().items():
-        config = EnvConfig(disturbance=True, crash_mode="disable", **overrides).validate()
+        config = EnvConfig().for_evaluation(**overrides)
         start = time.time()
         result = evaluate(
             policy_cls(config),

@@ -143,13 +143,7 @@ def eval_config(budget: Budget, damaged: int = 0):
     from pes.sim.config import EnvConfig  # noqa: PLC0415
 
     evader = "ddpg" if (MODELS_DIR / SHIPPED["evader-ddpg"]).is_file() else "flee"
-    return EnvConfig(
-        disturbance=True,
-        crash_mode="disable",
-        evader_policy=evader,
-        damaged=damaged,
-        **budget.eval_env,
-    ).validate()
+    return EnvConfig().for_evaluation(evader_policy=evader, damaged=damaged, **budget.eval_env)
 
 
 def evaluations(spec: dict) -> dict[str, int]:

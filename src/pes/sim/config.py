@@ -19,6 +19,20 @@ Dynamics = Literal["quadrotor", "point_mass"]
 CrashMode = Literal["continue", "disable"]
 EVADER_POLICIES = ("flee", "random", "ddpg", "external")
 
+REWARD_KEYS = (
+    "cooperation_weight",
+    "self_weight",
+    "safe_distance",
+    "softplus_k",
+    "crash_reward",
+    "capture_reward",
+    "encirclement_weight",
+    "evader_capture_reward",
+    "evader_crash_reward",
+)
+"""Scenario keys that only shape the reward: a training run may change them, every evaluation
+(:meth:`EnvConfig.for_evaluation`) resets them to the paper's values."""
+
 
 @dataclass
 class EnvConfig:
@@ -290,6 +304,15 @@ class EnvConfig:
     def replace(self, **changes: Any) -> EnvConfig:
         """A checked copy with some fields changed."""
         return from_dict(EnvConfig, changes, base=self)
+
+    def for_evaluation(self, **changes: Any) -> EnvConfig:
+        """This scenario under the paper's evaluation protocol (§V-B, Table IV): disturbance
+        on, a crash disables the pursuer for good, and the keys of :data:`REWARD_KEYS` back at
+        the paper's values, so that every reported reward is the paper's; ``changes`` last."""
+        paper = EnvConfig()
+        protocol = {"disturbance": True, "crash_mode": "disable"}
+        protocol.update({key: getattr(paper, key) for key in REWARD_KEYS})
+        return self.replace(**{**protocol, **changes})
 
     @property
     def arena_diagonal(self) -> float:
