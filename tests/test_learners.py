@@ -15,7 +15,7 @@ import torch
 
 import pes
 from pes.algos.buffer import ReplayBuffer
-from pes.algos.cbc_tp import CBCTP
+from pes.algos.cbc_tp import CBCTP, exit_charge
 from pes.algos.config import build_train_config
 from pes.algos.features import frames, pursuer_obs
 from pes.algos.io import save_atomic
@@ -151,6 +151,26 @@ def test_all_pursuer_actor_gradient_trains(tmp_path):
     assert summary["updates"] > 0 and (tmp_path / "all" / "policy.pt").is_file()
     with pytest.raises(ConfigError, match="actor_gradient"):
         build_train_config("cbc-tp", "tiny", {"actor_gradient": "some"})
+
+
+def test_exits_are_charged_their_last_reward_for_the_steps_to_come(tmp_path):
+    # Sample 0: pursuer 1 crashes (disabled), three fly on. Sample 1: pursuer 0 crashes and
+    # the episode fails with two left: all three alive in s leave. Sample 2: a capture.
+    reward = torch.tensor([[-1.0, -4.0, -1.0, -1.0], [-3.5, -1.5, -1.0, 0.0], [4.0, 4.0, 4.0, 4.0]])
+    alive = torch.tensor([[1, 1, 1, 1], [1, 1, 1, 0], [1, 1, 1, 1]], dtype=torch.bool)
+    next_alive = torch.tensor([[1, 0, 1, 1], [0, 1, 1, 0], [1, 1, 1, 1]], dtype=torch.bool)
+    terminated = torch.tensor([False, True, True])
+    charge = exit_charge(reward, alive, next_alive, terminated, 0.95, 3, crash_reward=-2.0)
+    factor = 0.95 / 0.05
+    expected = torch.tensor(
+        [[0.0, -2.0 * factor, 0.0, 0.0], [-1.5 * factor, -1.5 * factor, -factor, 0.0], [0.0] * 4]
+    )
+    assert torch.allclose(charge, expected)
+    run = tmp_path / "exits"
+    summary = _tiny(
+        run, episodes=8, eval_episodes=0, charge_exits=True, env={"crash_mode": "disable"}
+    )
+    assert summary["updates"] > 0
 
 
 def test_evader_speed_curriculum_rises_with_success(tmp_path):

@@ -6,6 +6,8 @@ One update (Algorithm 1, lines 11-21), from the shared replay storage:
    loss eq. (7) (mean squared error in arena units);
 2. critic: y_i = r_i + gamma * (1 - terminated) * Q'_i(s', a', p'), a' from the target actor on
    s' and the predicted path p' of s' (eqs. 5-6), masked mean over the pursuers alive in s;
+   with ``charge_exits``, a pursuer leaving the game (disabled, or its episode failed) adds
+   its last step's reward, crash term aside, times gamma / (1 - gamma);
 3. actor: maximise Q_i(s, a_1..pi(o_i, p)..a_N, p) (eq. 4) for one random alive pursuer i of
    each sample, the others' actions from the buffer (``actor_gradient="one"``), or the mean
    Q_i with every alive pursuer acting (``"all"``), plus a small penalty on the squared
@@ -140,6 +142,31 @@ class CBCTPPolicy(nn.Module):
         """Stateless between steps (the history comes from the environment)."""
 
 
+def exit_charge(
+    reward: Tensor,
+    alive: Tensor,
+    next_alive: Tensor,
+    terminated: Tensor,
+    gamma: float,
+    capture_count: int,
+    crash_reward: float,
+) -> Tensor:
+    """What a pursuer leaving the game still owes, added to its TD target (``charge_exits``).
+
+    A pursuer alive in s leaves when it is not alive in s' (a crash under
+    ``crash_mode="disable"``) or when the episode terminates with fewer than ``capture_count``
+    pursuers alive (a failure). It is charged its last step's reward, the crash term aside, for
+    every step to come: ``rate * gamma / (1 - gamma)``, as if it hovered where it left until the
+    episode's end. Shapes: ``reward``, ``alive``, ``next_alive`` (B, N); ``terminated`` (B,);
+    returns (B, N), zero for pursuers that stay.
+    """
+    lost = alive & ~next_alive
+    failed = terminated & (next_alive.sum(-1) < capture_count)
+    exits = lost | (alive & failed.unsqueeze(-1))
+    rate = reward - crash_reward * lost.to(reward.dtype)
+    return exits.to(reward.dtype) * rate * (gamma / (1.0 - gamma))
+
+
 class CBCTP:
     """The CBC-TP Net learner (``use_tp=False``: CBC Net)."""
 
@@ -149,6 +176,7 @@ class CBCTP:
         self.cfg = cfg
         self.n = env_cfg.num_pursuers
         self.history = env_cfg.history_length
+        self.capture_count, self.crash_reward = env_cfg.capture_count, env_cfg.crash_reward
         self.device = device
         self.actor = self.make_actor(cfg, self.n).to(device)
         self.critic = self.make_critic(cfg, self.n).to(device)
@@ -283,6 +311,16 @@ class CBCTP:
             q_next = self.critic_target(next_state, next_alive, next_action, next_pred)
             keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
             y = reward + cfg.gamma * keep * q_next
+            if cfg.charge_exits:
+                y = y + exit_charge(
+                    reward,
+                    alive,
+                    next_alive,
+                    terminated,
+                    cfg.gamma,
+                    self.capture_count,
+                    self.crash_reward,
+                )
         q = self.critic(state, alive, action, pred)
         critic_loss = masked_mean((q - y) ** 2, alive)
         stats["critic_grad"] = optimise(

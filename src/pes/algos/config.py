@@ -92,6 +92,11 @@ class TrainConfig:
     """Actor update of CBC-TP: ``one`` (one random alive pursuer per sample takes the current
     actor's action, the others keep their stored ones, as MADDPG) or ``all`` (every alive
     pursuer takes it at once; the actor ascends the mean of their Qs)."""
+    charge_exits: bool = False
+    """CBC-TP, for training with ``env.crash_mode=disable``: a pursuer that leaves the game --
+    disabled by a crash, or in an episode that fails with too few pursuers left -- gets as TD
+    target its reward plus its last step's reward (crash term aside) for every step to come
+    (discounted), instead of nothing: with every step's reward negative, leaving must not pay."""
     grad_clip: float = 1.0
     """Gradient norm clip (0 = none)."""
     action_reg: float = 1e-3
