@@ -168,10 +168,10 @@ class EnvConfig:
     capture_reward: float = 5.0
     """Reward of every alive pursuer on the step of capture."""
     encirclement_weight: float = 0.0
-    """Not in the paper (0 = its reward): every alive pursuer gets -weight x |mean of the unit
-    vectors from the evader to the alive pursuers| each step, 0 when they surround the evader
-    evenly, -weight when all come from one side. A training aid against the pack that trails
-    the evader (docs/algorithms/cbc_tp.md)."""
+    """Not in the paper (0 = its reward): every alive pursuer gets -weight x the length of the
+    mean of the unit vectors from the evader to the alive pursuers, each step: 0 when they
+    surround the evader evenly, -weight when all come from one side. A training aid against the
+    pack that trails the evader (docs/algorithms/cbc_tp.md)."""
     evader_capture_reward: float = -5.0
     """Reward of the evader on the step of capture."""
     evader_crash_reward: float = -2.0

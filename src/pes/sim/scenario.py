@@ -482,17 +482,16 @@ def advance(
     r_co = -cfg.cooperation_weight * rho * (distances * alive0_f).sum(-1, keepdim=True)
     obstacle_term = softplus_obstacle_term(dist[:, :n], cfg.safe_distance, cfg.softplus_k)
     r_self = -(cfg.self_weight * rho * distances + obstacle_term)
-    # Encirclement (not in the paper; 0 by default): how one-sided the alive pursuers are, seen
-    # from the evader -- the norm of the mean of the unit vectors towards them, in [0, 1].
-    unit_x = dx / distances.clamp(min=1e-6) * alive0_f
-    unit_y = dy / distances.clamp(min=1e-6) * alive0_f
-    count = alive0_f.sum(-1, keepdim=True).clamp(min=1.0)
-    one_sided = torch.sqrt(unit_x.sum(-1, keepdim=True) ** 2 + unit_y.sum(-1, keepdim=True) ** 2)
-    r_enc = -cfg.encirclement_weight * one_sided / count
+    reward = r_co + r_self
+    if cfg.encirclement_weight:
+        # Not in the paper: how one-sided the alive pursuers are, seen from the evader -- the
+        # length of the mean of the unit vectors towards them, in [0, 1].
+        unit_x = (dx / distances.clamp(min=1e-6) * alive0_f).sum(-1, keepdim=True)
+        unit_y = (dy / distances.clamp(min=1e-6) * alive0_f).sum(-1, keepdim=True)
+        count = alive0_f.sum(-1, keepdim=True).clamp(min=1.0)
+        reward = reward - cfg.encirclement_weight * torch.sqrt(unit_x**2 + unit_y**2) / count
     reward = (
-        r_co
-        + r_self
-        + r_enc
+        reward
         + cfg.crash_reward * crashed.to(x.dtype)
         + cfg.capture_reward * success.unsqueeze(-1).to(x.dtype)
     ) * alive0_f
