@@ -40,8 +40,7 @@ def assert_learns(algo: str, run: Path, **values) -> None:
     20 points more often and earn clearly more reward than an untrained one."""
     cfg = build_train_config(algo, "tiny", dict(FAST, env=CAPTURE_TASK, eval_episodes=0, **values))
     train(cfg, run, progress=False)
-    paper_reward = dict(self_weight=0.5, cooperation_weight=0.1)
-    eval_cfg = cfg.env_config().replace(crash_mode="disable", **paper_reward)
+    eval_cfg = cfg.env_config().for_evaluation(disturbance=False)  # the paper's reward
     trained, _ = load_pursuer_policy(run, eval_cfg)
     torch.manual_seed(0)
     untrained, _ = ALGOS[algo].build_policy(cfg, eval_cfg, "cpu")
