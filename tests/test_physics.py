@@ -289,3 +289,33 @@ def test_encirclement_term_rewards_surrounding_the_evader():
         assert torch.allclose(reward_with(x, y, 0.0), reward_with(*around, 0.0), atol=1e-5)
     assert torch.allclose(reward_with(*around, 2.0), reward_with(*around, 0.0), atol=1e-5)
     assert torch.allclose(reward_with(*east, 2.0), reward_with(*east, 0.0) - 2.0, atol=1e-5)
+
+
+def test_intercept_lead_charges_all_but_the_nearest_pursuer_their_distance_to_the_lead_point():
+    """``intercept_lead`` T: the nearest alive pursuer keeps eq. (9)'s distance to the evader,
+    the others are charged their distance to the evader's position T seconds ahead."""
+
+    def reward_with(lead):
+        cfg = pes.EnvConfig(
+            num_pursuers=3,
+            layout="empty",
+            evader_policy="external",
+            dynamics="point_mass",
+            intercept_lead=lead,
+        )
+        env = pes.make_env(cfg, num_envs=1, seed=0)
+        env.reset()
+        # The evader at (50, 50) flies east at 10 m/s; a pursuer ahead of it, one behind, one north.
+        x, y = torch.tensor([[60.0, 20, 50, 50]]), torch.tensor([[50.0, 50, 80, 50]])
+        vx = torch.tensor([[0.0, 0, 0, 10]])
+        set_vehicles(env, x=x, y=y, vx=vx, vy=torch.zeros(1, 4))
+        _, reward, _, _, info = env.step(torch.zeros(1, 3, 2), evader_actions=torch.zeros(1, 2))
+        return reward[0], info["distances"][0]
+
+    paper, d = reward_with(0.0)
+    shaped, _ = reward_with(2.0)
+    rho = 1 / math.hypot(100, 100)
+    # After the step the evader is at (51, 50) at 10 m/s: its lead point is (71, 50).
+    to_lead = torch.tensor([d[0], 51.0, math.hypot(21.0, 30.0)])
+    assert torch.allclose(d, torch.tensor([9.0, 31.0, math.hypot(1.0, 30.0)]), atol=1e-3)
+    assert torch.allclose(shaped - paper, -0.5 * rho * (to_lead - d), atol=1e-5)

@@ -27,6 +27,7 @@ REWARD_KEYS = (
     "crash_reward",
     "capture_reward",
     "encirclement_weight",
+    "intercept_lead",
     "evader_capture_reward",
     "evader_crash_reward",
 )
@@ -172,6 +173,11 @@ class EnvConfig:
     mean of the unit vectors from the evader to the alive pursuers, each step: 0 when they
     surround the evader evenly, -weight when all come from one side. A training aid against the
     pack that trails the evader (docs/algorithms/cbc_tp.md)."""
+    intercept_lead: float = 0.0
+    """Not in the paper (0 = its reward): roles for r_self. The alive pursuer nearest the evader
+    keeps its distance to the evader; every other one is charged its distance to the point the
+    evader reaches in ``intercept_lead`` seconds at its current velocity (s), so that the rest
+    of the swarm is paid for cutting the evader off rather than trailing it. A training aid."""
     evader_capture_reward: float = -5.0
     """Reward of the evader on the step of capture."""
     evader_crash_reward: float = -2.0
@@ -218,6 +224,7 @@ class EnvConfig:
             "cooperation_weight",
             "self_weight",
             "encirclement_weight",
+            "intercept_lead",
         ]
         for name in non_negative:
             value = getattr(self, name)

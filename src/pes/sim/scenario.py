@@ -481,7 +481,16 @@ def advance(
     alive0_f = alive0.to(x.dtype)
     r_co = -cfg.cooperation_weight * rho * (distances * alive0_f).sum(-1, keepdim=True)
     obstacle_term = softplus_obstacle_term(dist[:, :n], cfg.safe_distance, cfg.softplus_k)
-    r_self = -(cfg.self_weight * rho * distances + obstacle_term)
+    own_distance = distances
+    if cfg.intercept_lead:
+        # Not in the paper: all but the nearest alive pursuer aim at the evader's lead point.
+        lead_x = dx - moved.vx[:, n:] * cfg.intercept_lead
+        lead_y = dy - moved.vy[:, n:] * cfg.intercept_lead
+        to_lead = torch.sqrt(lead_x * lead_x + lead_y * lead_y)
+        gap = torch.where(alive0, distances, float("inf"))
+        chaser = gap == gap.amin(-1, keepdim=True)
+        own_distance = torch.where(chaser, distances, to_lead)
+    r_self = -(cfg.self_weight * rho * own_distance + obstacle_term)
     reward = r_co + r_self
     if cfg.encirclement_weight:
         # Not in the paper: how one-sided the alive pursuers are, seen from the evader -- the
