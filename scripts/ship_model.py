@@ -11,8 +11,10 @@ it over ``--episodes`` episodes with the paper's protocol (disturbance on,
 numbers (``results/shipped_NAME.json``):
 
 * the evader: PID(PF) pursuers against it, beside PID(PF) against the scripted ``flee`` evader;
-* the swarm: against the shipped evader with 0, 1 and 2 pursuers damaged (Table VI), and
-  against ``flee``.
+* the swarm: against the shipped evader with 0, 1 and 2 pursuers damaged (Table VI), against
+  ``flee``, and against the shipped evader with its top speed capped below its 12 m/s (the
+  speeds of ``pes.experiments.calibration``, where PID(PF)'s numbers for the same evaders are:
+  how the swarm compares with PID(PF) as the game gets easier, down to the paper's difficulty).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from pes.algos.io import (  # noqa: E402
 )
 from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
+from pes.experiments.calibration import EVADER_SPEEDS  # noqa: E402
 from pes.policies import PIDPotentialField  # noqa: E402
 from pes.sim.bench import machine_info  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
@@ -70,6 +73,29 @@ def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:
         policy, cfg, episodes=episodes, num_envs=100, seed=seed, progress=True, compile=True
     )
     return result.summary()
+
+
+def pid_pf_by_speed() -> list[str]:
+    """Model-card lines: PID(PF) against the evader at the capped speeds, from
+    ``results/calibration.json`` (its own seed and command), if that file has them."""
+    path = ROOT / "results" / "calibration.json"
+    if not path.is_file():
+        return []
+    rows = json.loads(path.read_text())["results"]
+    found = [
+        (speed, rows[key])
+        for speed in EVADER_SPEEDS
+        if (key := f"pid-pf, 5 pursuers, DDPG evader at {speed:g} m/s") in rows
+    ]
+    if not found:
+        return []
+    return [
+        "",
+        "PID(PF) against the same evader (results/calibration.json, "
+        "`python -m pes.experiments.calibration`): "
+        + ", ".join(f"{speed:g} m/s {100 * row['success_rate']:.1f} %" for speed, row in found)
+        + ". The paper's 27.3 % for PID(PF) lies between our evader at 8 and 9 m/s.",
+    ]
 
 
 def main() -> None:
@@ -108,6 +134,13 @@ def main() -> None:
         cfg = base.replace(evader_policy="flee")
         policy, _ = load_pursuer_policy(target, cfg)
         evals["vs flee evader, 0 damaged"] = run(policy, cfg, args.episodes, args.seed)
+        for speed in EVADER_SPEEDS:
+            if speed < evader.evader_max_speed:
+                cfg = evader.replace(evader_max_speed=speed)
+                policy, _ = load_pursuer_policy(target, cfg)
+                evals[f"vs ddpg evader at {speed:g} m/s, 0 damaged"] = run(
+                    policy, cfg, args.episodes, args.seed
+                )
 
     machine = machine_info()
     meta = info["meta"]
@@ -163,6 +196,7 @@ def main() -> None:
             "Paper (Table VI, CBC-TP Net): "
             + ", ".join(f"{k} damaged {s} % / {t} steps" for k, (s, t) in PAPER_TABLE_VI.items())
             + ".",
+            *pid_pf_by_speed(),
         ]
     else:
         lines += ["", "Success rate here is the pursuers' (lower means a stronger evader)."]
