@@ -262,22 +262,27 @@ def test_rewards_follow_equations_8_and_9():
     assert float(info["evader_reward"][0]) == pytest.approx(rho * 10.0, abs=1e-4)
 
 
+def one_step_rewards(x, y, vx=None, **changes):
+    """Pursuers' rewards and distances, (N,) each, of one step on the empty map with point-mass
+    dynamics, from positions ``x``, ``y`` and x-velocities ``vx`` ((1, N + 1) each, the evader
+    last; at rest if None), every action zero; ``changes`` are EnvConfig keys."""
+    n = x.shape[1] - 1
+    cfg = pes.EnvConfig(
+        num_pursuers=n, layout="empty", evader_policy="external", dynamics="point_mass", **changes
+    )
+    env = pes.make_env(cfg, num_envs=1, seed=0)
+    env.reset()
+    vx = torch.zeros_like(x) if vx is None else vx
+    set_vehicles(env, x=x, y=y, vx=vx, vy=torch.zeros_like(x))
+    _, reward, _, _, info = env.step(torch.zeros(1, n, 2), evader_actions=torch.zeros(1, 2))
+    return reward[0], info["distances"][0]
+
+
 def test_encirclement_term_rewards_surrounding_the_evader():
     """``encirclement_weight`` adds -w |mean unit vector from the evader to the pursuers|."""
 
     def reward_with(x, y, weight):
-        cfg = pes.EnvConfig(
-            num_pursuers=4,
-            layout="empty",
-            evader_policy="external",
-            dynamics="point_mass",
-            encirclement_weight=weight,
-        )
-        env = pes.make_env(cfg, num_envs=1, seed=0)
-        env.reset()
-        set_vehicles(env, x=x, y=y, vx=torch.zeros(1, 5), vy=torch.zeros(1, 5))
-        _, reward, _, _, _ = env.step(torch.zeros(1, 4, 2), evader_actions=torch.zeros(1, 2))
-        return reward[0]
+        return one_step_rewards(x, y, encirclement_weight=weight)[0]
 
     # Four pursuers 10 m from the evader at (50, 50): on all four sides, then all to its east.
     around = (
@@ -294,26 +299,11 @@ def test_encirclement_term_rewards_surrounding_the_evader():
 def test_intercept_lead_charges_all_but_the_nearest_pursuer_their_distance_to_the_lead_point():
     """``intercept_lead`` T: the nearest alive pursuer keeps eq. (9)'s distance to the evader,
     the others are charged their distance to the evader's position T seconds ahead."""
-
-    def reward_with(lead):
-        cfg = pes.EnvConfig(
-            num_pursuers=3,
-            layout="empty",
-            evader_policy="external",
-            dynamics="point_mass",
-            intercept_lead=lead,
-        )
-        env = pes.make_env(cfg, num_envs=1, seed=0)
-        env.reset()
-        # The evader at (50, 50) flies east at 10 m/s; a pursuer ahead of it, one behind, one north.
-        x, y = torch.tensor([[60.0, 20, 50, 50]]), torch.tensor([[50.0, 50, 80, 50]])
-        vx = torch.tensor([[0.0, 0, 0, 10]])
-        set_vehicles(env, x=x, y=y, vx=vx, vy=torch.zeros(1, 4))
-        _, reward, _, _, info = env.step(torch.zeros(1, 3, 2), evader_actions=torch.zeros(1, 2))
-        return reward[0], info["distances"][0]
-
-    paper, d = reward_with(0.0)
-    shaped, _ = reward_with(2.0)
+    # The evader at (50, 50) flies east at 10 m/s; a pursuer ahead of it, one behind, one north.
+    x, y = torch.tensor([[60.0, 20, 50, 50]]), torch.tensor([[50.0, 50, 80, 50]])
+    vx = torch.tensor([[0.0, 0, 0, 10]])
+    paper, d = one_step_rewards(x, y, vx, intercept_lead=0.0)
+    shaped, _ = one_step_rewards(x, y, vx, intercept_lead=2.0)
     rho = 1 / math.hypot(100, 100)
     # After the step the evader is at (51, 50) at 10 m/s: its lead point is (71, 50).
     to_lead = torch.tensor([d[0], 51.0, math.hypot(21.0, 30.0)])
