@@ -41,7 +41,7 @@ from pes.algos.io import (  # noqa: E402
 )
 from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
-from pes.experiments.calibration import EVADER_SPEEDS  # noqa: E402
+from pes.experiments.calibration import EVADER_SPEEDS, evader_speed_case  # noqa: E402
 from pes.policies import PIDPotentialField  # noqa: E402
 from pes.sim.bench import machine_info  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
@@ -84,9 +84,9 @@ def pid_pf_by_speed() -> list[str]:
         return []
     rows = json.loads(path.read_text())["results"]
     found = [
-        (speed, rows[key])
+        (speed, rows[evader_speed_case(speed)])
         for speed in EVADER_SPEEDS
-        if (key := f"pid-pf, 5 pursuers, DDPG evader at {speed:g} m/s") in rows
+        if evader_speed_case(speed) in rows
     ]
     if not found:
         return []

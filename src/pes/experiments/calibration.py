@@ -42,6 +42,12 @@ EVADER_SPEEDS = (8.0, 9.0, 10.0, 11.0, 12.0)
 """Top speeds (m/s) of the shipped DDPG evader against five PID(PF) pursuers."""
 
 
+def evader_speed_case(speed: float) -> str:
+    """The name of the case "five PID(PF) pursuers against the shipped evader capped at
+    ``speed`` m/s" (a key of ``results/calibration.json``)."""
+    return f"pid-pf, 5 pursuers, DDPG evader at {speed:g} m/s"
+
+
 def cases() -> dict[str, tuple[type, dict]]:
     """Every case measured: :data:`CASES`, then the DDPG evader at :data:`EVADER_SPEEDS`."""
     from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: PLC0415
@@ -49,7 +55,7 @@ def cases() -> dict[str, tuple[type, dict]]:
     out = dict(CASES)
     if (MODELS_DIR / SHIPPED["evader-ddpg"]).is_file():
         for v in EVADER_SPEEDS:
-            out[f"pid-pf, 5 pursuers, DDPG evader at {v:g} m/s"] = (
+            out[evader_speed_case(v)] = (
                 PIDPotentialField,
                 {"evader_policy": "ddpg", "evader_max_speed": v},
             )

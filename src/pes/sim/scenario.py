@@ -481,14 +481,15 @@ def advance(
     alive0_f = alive0.to(x.dtype)
     r_co = -cfg.cooperation_weight * rho * (distances * alive0_f).sum(-1, keepdim=True)
     obstacle_term = softplus_obstacle_term(dist[:, :n], cfg.safe_distance, cfg.softplus_k)
+    # The nearest alive pursuer's distance (E, 1): the evader's reward, and the chaser's role.
+    nearest_gap = torch.where(alive0, distances, float("inf")).amin(-1, keepdim=True)
     own_distance = distances
     if cfg.intercept_lead:
         # Not in the paper: all but the nearest alive pursuer aim at the evader's lead point.
         lead_x = dx - moved.vx[:, n:] * cfg.intercept_lead
         lead_y = dy - moved.vy[:, n:] * cfg.intercept_lead
         to_lead = torch.sqrt(lead_x * lead_x + lead_y * lead_y)
-        gap = torch.where(alive0, distances, float("inf"))
-        chaser = gap == gap.amin(-1, keepdim=True)
+        chaser = alive0 & (distances == nearest_gap)
         own_distance = torch.where(chaser, distances, to_lead)
     r_self = -(cfg.self_weight * rho * own_distance + obstacle_term)
     reward = r_co + r_self
@@ -504,8 +505,7 @@ def advance(
         + cfg.crash_reward * crashed.to(x.dtype)
         + cfg.capture_reward * success.unsqueeze(-1).to(x.dtype)
     ) * alive0_f
-    nearest_gap = torch.where(alive0, distances, float("inf")).amin(-1)
-    nearest_gap = torch.where(alive0.any(-1), nearest_gap, 0.0)
+    nearest_gap = torch.where(alive0.any(-1), nearest_gap[:, 0], 0.0)
     evader_reward = (
         rho * nearest_gap
         - softplus_obstacle_term(dist[:, -1], cfg.safe_distance, cfg.softplus_k)
