@@ -2,6 +2,8 @@
 
     python scripts/ship_model.py evader-ddpg runs/evader/best_policy.pt \
         --command "pes train --algo evader-ddpg ..."
+    python scripts/ship_model.py evader-ddpg-paper runs/evader-snap/snapshots/epNNNNNN.pt \
+        --command "pes train --algo evader-ddpg ... && python scripts/pick_evader.py ..."
     python scripts/ship_model.py cbc-tp runs/cbc_tp/best_policy.pt --command "pes train ..."
 
 Copies the policy file to ``src/pes/models/`` (given a training checkpoint, writes a policy
@@ -10,11 +12,12 @@ it over ``--episodes`` episodes with the paper's protocol (disturbance on,
 ``crash_mode="disable"``), and writes the model card (``src/pes/models/NAME.md``) and the raw
 numbers (``results/shipped_NAME.json``):
 
-* the evader: PID(PF) pursuers against it, beside PID(PF) against the scripted ``flee`` evader;
-* the swarm: against the shipped evader with 0, 1 and 2 pursuers damaged (Table VI), against
-  ``flee``, and against the shipped evader with its top speed capped below its 12 m/s (the
-  speeds of ``pes.experiments.calibration``, where PID(PF)'s numbers for the same evaders are:
-  how the swarm compares with PID(PF) as the game gets easier, down to the paper's difficulty).
+* an evader (``evader-ddpg-paper``, ``evader-ddpg``): PID(PF) pursuers against it, beside
+  PID(PF) against the scripted ``flee`` evader;
+* the swarm: against the default evader (``evader-ddpg-paper``) with 0, 1 and 2 pursuers
+  damaged (Table VI), against ``flee``, and against the fully trained evader (``evader-ddpg``)
+  at its 12 m/s and with its top speed capped below (the speeds of
+  ``pes.experiments.calibration``, where PID(PF)'s numbers for the same evaders are).
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ from pes.evaluate import evaluate  # noqa: E402
 from pes.experiments.calibration import EVADER_SPEEDS, evader_speed_case  # noqa: E402
 from pes.policies import PIDPotentialField  # noqa: E402
 from pes.sim.bench import machine_info  # noqa: E402
-from pes.sim.config import EnvConfig  # noqa: E402
+from pes.sim.config import SHIPPED_EVADERS, EnvConfig  # noqa: E402
 
 PAPER_TABLE_VI = {0: (98.8, 132), 1: (95.6, 212), 2: (86.7, 308)}
 PAPER_PID_PF = 27.3  # Table IV: PID(PF)'s success rate (%) against the paper's evader
@@ -77,7 +80,7 @@ def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:
 
 
 def pid_pf_by_speed() -> list[str]:
-    """Model-card lines: PID(PF) against the evader at the capped speeds, from
+    """Model-card lines: PID(PF) against the fully trained evader at the capped speeds, from
     ``results/calibration.json`` (its own seed and command), if that file has them."""
     path = ROOT / "results" / "calibration.json"
     if not path.is_file():
@@ -123,9 +126,9 @@ def main() -> None:
     info = describe(target)
     base = EnvConfig().for_evaluation()
     evals: dict[str, dict] = {}
-    if args.name == "evader-ddpg":
+    if args.name in SHIPPED_EVADERS:
         pid = PIDPotentialField(base)
-        evals["pid-pf vs ddpg evader"] = run(
+        evals[f"pid-pf vs {args.name}"] = run(
             pid,
             base.replace(evader_policy="ddpg", evader_model=str(target)),
             args.episodes,
@@ -136,18 +139,20 @@ def main() -> None:
         )
     else:
         evader = base.replace(evader_policy="ddpg")
+        default = evader.evader_model
         for k in (0, 1, 2):
             cfg = evader.replace(damaged=k)
             policy, _ = load_pursuer_policy(target, cfg)
-            evals[f"vs ddpg evader, {k} damaged"] = run(policy, cfg, args.episodes, args.seed)
+            evals[f"vs {default}, {k} damaged"] = run(policy, cfg, args.episodes, args.seed)
         cfg = base.replace(evader_policy="flee")
         policy, _ = load_pursuer_policy(target, cfg)
         evals["vs flee evader, 0 damaged"] = run(policy, cfg, args.episodes, args.seed)
-        for speed in EVADER_SPEEDS:
-            if speed < evader.evader_max_speed:
-                cfg = evader.replace(evader_max_speed=speed)
+        strong = evader.replace(evader_model="evader-ddpg")
+        for speed in sorted(EVADER_SPEEDS, reverse=True):
+            if speed <= strong.evader_max_speed:
+                cfg = strong.replace(evader_max_speed=speed)
                 policy, _ = load_pursuer_policy(target, cfg)
-                evals[f"vs ddpg evader at {speed:g} m/s, 0 damaged"] = run(
+                evals[f"vs evader-ddpg at {speed:g} m/s, 0 damaged"] = run(
                     policy, cfg, args.episodes, args.seed
                 )
 
@@ -201,6 +206,9 @@ def main() -> None:
         )
     if args.name == "cbc-tp":
         lines += [
+            "",
+            f"`{default}` is the default opponent, the DDPG evader calibrated to the paper's "
+            "(its model card); `evader-ddpg` is the fully trained DDPG evader, far stronger.",
             "",
             "Paper (Table VI, CBC-TP Net): "
             + ", ".join(f"{k} damaged {s} % / {t} steps" for k, (s, t) in PAPER_TABLE_VI.items())

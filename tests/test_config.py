@@ -60,6 +60,7 @@ def test_unknown_key_suggests_the_right_one():
         ({"dynamics": "rocket"}, "expected one of"),
         ({"crash_mode": "explode"}, "expected one of"),
         ({"evader_policy": "teleport"}, "evader_policy"),
+        ({"evader_policy": "ddpg", "evader_model": "no/such/evader.pt"}, "evader-ddpg-paper"),
         ({"layout": "no/such/file.yaml"}, "layout"),
         ({"pursuer_inertia": [1.0, 2.0]}, "expected 3 values"),
         ({"physics_substeps": 1}, "too long"),
@@ -68,6 +69,19 @@ def test_unknown_key_suggests_the_right_one():
 def test_impossible_values_are_rejected(values, message):
     with pytest.raises(ConfigError, match=message):
         pes.EnvConfig.from_dict(values)
+
+
+def test_shipped_evaders_load_and_the_default_is_one_of_them():
+    """Every evader name the scenario accepts is a shipped model, the default included."""
+    from pes.algos.io import SHIPPED
+    from pes.algos.policy import load_evader_actor
+    from pes.sim.config import SHIPPED_EVADERS
+
+    assert pes.EnvConfig().evader_model in SHIPPED_EVADERS
+    for name in SHIPPED_EVADERS:
+        assert name in SHIPPED
+        actor = load_evader_actor(name)
+        assert not any(p.requires_grad for p in actor.parameters())
 
 
 def test_a_layout_with_no_room_to_spawn_is_rejected():

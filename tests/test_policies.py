@@ -64,14 +64,20 @@ def test_evaluate_rejects_zero_episodes():
 
 
 def test_calibration_cases(monkeypatch):
-    """The calibration measures the flee cases and the shipped DDPG evader's speed ladder, each
-    in its own scenario."""
+    """The calibration measures the flee cases, the default DDPG evader and the fully trained
+    one's speed ladder, each in its own scenario."""
     from pes.experiments import calibration
 
     cases = calibration.cases()
     ddpg = [name for name in cases if "DDPG" in name]
-    assert len(ddpg) == len(calibration.EVADER_SPEEDS)
-    assert cases[ddpg[0]][1] == {"evader_policy": "ddpg", "evader_max_speed": 8.0}
+    assert ddpg[0] == calibration.PAPER_EVADER_CASE
+    assert cases[ddpg[0]][1] == {"evader_policy": "ddpg", "evader_model": "evader-ddpg-paper"}
+    assert len(ddpg) == 1 + len(calibration.EVADER_SPEEDS)
+    assert cases[ddpg[1]][1] == {
+        "evader_policy": "ddpg",
+        "evader_model": "evader-ddpg",
+        "evader_max_speed": 8.0,
+    }
     monkeypatch.setattr(
         calibration, "CASES", {"random, 5 pursuers": calibration.CASES["random, 5 pursuers"]}
     )

@@ -82,15 +82,15 @@ def _non_negative(text: str) -> int:
 
 
 def _shipped(name: str) -> bool:
-    from pes.algos.io import MODELS_DIR, SHIPPED
+    from pes.algos.io import is_shipped
 
-    return (MODELS_DIR / SHIPPED[name]).is_file()
+    return is_shipped(name)
 
 
 def _opponent() -> dict[str, Any]:
-    """The default evader of evaluations: the shipped DDPG evader, as in the paper (``flee``
-    if this installation has none)."""
-    return {"evader_policy": "ddpg"} if _shipped("evader-ddpg") else {}
+    """The default evader of evaluations: the shipped DDPG evader calibrated to the paper's, as
+    in the paper (``flee`` if this installation has none)."""
+    return {"evader_policy": "ddpg"} if _shipped(EnvConfig().evader_model) else {}
 
 
 # --- policies --------------------------------------------------------------------------------

@@ -25,8 +25,18 @@ POLICY_FORMAT = "pes-policy"
 VERSION = 1
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 """Where the shipped policy files and their model cards live."""
-SHIPPED = {"cbc-tp": "cbc_tp.pt", "evader-ddpg": "evader_ddpg.pt"}
-"""Shipped policy files by algorithm name."""
+SHIPPED = {
+    "cbc-tp": "cbc_tp.pt",
+    "evader-ddpg-paper": "evader_ddpg_paper.pt",
+    "evader-ddpg": "evader_ddpg.pt",
+}
+"""Shipped policy files by name: the CBC-TP Net swarm, the DDPG evader calibrated to the
+paper's (the default opponent, ``EnvConfig.evader_model``) and the fully trained DDPG evader."""
+
+
+def is_shipped(name: str) -> bool:
+    """Whether this installation holds the shipped model ``name`` (a key of :data:`SHIPPED`)."""
+    return (MODELS_DIR / SHIPPED[name]).is_file()
 
 
 def save_atomic(obj: dict[str, Any], path: str | Path) -> None:

@@ -11,9 +11,12 @@ on the default map, against the scripted ``flee`` evader:
   never catch the faster evader;
 * five random pursuers, for scale;
 
-and against the shipped DDPG evader (if this installation has it), five PID(PF) pursuers with
-the evader's top speed capped at 8 ... 12 m/s (12: the scenario's default; the pursuers fly at
-10): how much of the game's difficulty is the evader's speed.
+and five PID(PF) pursuers against the shipped DDPG evaders (those this installation has):
+
+* the default one, calibrated to the paper's (``evader-ddpg-paper``): PID(PF) should catch it
+  about as often as the paper's 27.3 %;
+* the fully trained one (``evader-ddpg``) with its top speed capped at 8 ... 12 m/s (12: the
+  scenario's default; the pursuers fly at 10): how much of its strength is its speed.
 """
 
 from __future__ import annotations
@@ -39,25 +42,34 @@ CASES = {
 """Name -> (pursuer policy, scenario overrides), against ``flee``."""
 
 EVADER_SPEEDS = (8.0, 9.0, 10.0, 11.0, 12.0)
-"""Top speeds (m/s) of the shipped DDPG evader against five PID(PF) pursuers."""
+"""Top speeds (m/s) of the fully trained DDPG evader against five PID(PF) pursuers."""
+
+PAPER_EVADER_CASE = "pid-pf, 5 pursuers, DDPG evader calibrated to the paper's"
+"""The case "five PID(PF) pursuers against the default evader, ``evader-ddpg-paper``"."""
 
 
 def evader_speed_case(speed: float) -> str:
-    """The name of the case "five PID(PF) pursuers against the shipped evader capped at
-    ``speed`` m/s" (a key of ``results/calibration.json``)."""
+    """The name of the case "five PID(PF) pursuers against the fully trained evader
+    (``evader-ddpg``) capped at ``speed`` m/s" (a key of ``results/calibration.json``)."""
     return f"pid-pf, 5 pursuers, DDPG evader at {speed:g} m/s"
 
 
 def cases() -> dict[str, tuple[type, dict]]:
-    """Every case measured: :data:`CASES`, then the DDPG evader at :data:`EVADER_SPEEDS`."""
-    from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: PLC0415
+    """Every case measured: :data:`CASES`, then the default DDPG evader, then the fully trained
+    one at :data:`EVADER_SPEEDS` (those of the shipped evaders this installation has)."""
+    from pes.algos.io import is_shipped  # noqa: PLC0415
 
     out = dict(CASES)
-    if (MODELS_DIR / SHIPPED["evader-ddpg"]).is_file():
+    if is_shipped("evader-ddpg-paper"):
+        out[PAPER_EVADER_CASE] = (
+            PIDPotentialField,
+            {"evader_policy": "ddpg", "evader_model": "evader-ddpg-paper"},
+        )
+    if is_shipped("evader-ddpg"):
         for v in EVADER_SPEEDS:
             out[evader_speed_case(v)] = (
                 PIDPotentialField,
-                {"evader_policy": "ddpg", "evader_max_speed": v},
+                {"evader_policy": "ddpg", "evader_model": "evader-ddpg", "evader_max_speed": v},
             )
     return out
 

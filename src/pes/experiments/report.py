@@ -326,7 +326,9 @@ def write_report(
         "budget": budget,
         "seeds": seeds,
         "eval_episodes": BUDGETS[budget].eval_episodes,
-        "evader": "shipped DDPG" if cfg.evader_policy == "ddpg" else cfg.evader_policy,
+        "evader": (
+            f"DDPG (`{cfg.evader_model}`)" if cfg.evader_policy == "ddpg" else cfg.evader_policy
+        ),
         "command": command or f"pes reproduce {target} --budget {budget} --seeds {seeds}",
         "hardware": f"{machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']}",
     }

@@ -81,7 +81,7 @@ def errors(pred: torch.Tensor, future: torch.Tensor) -> dict[str, list[float]]:
 
 def run_tpnet(spec: dict, budget, folder: Path) -> dict[str, Any]:
     """One Table V trial; returns (and the caller stores) its FDE / ADE."""
-    from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: PLC0415
+    from pes.algos.io import is_shipped  # noqa: PLC0415
     from pes.algos.nets import TPNet  # noqa: PLC0415
     from pes.algos.policy import load_pursuer_policy  # noqa: PLC0415
     from pes.experiments.trials import EVAL_SEED, eval_config  # noqa: PLC0415
@@ -89,7 +89,7 @@ def run_tpnet(spec: dict, budget, folder: Path) -> dict[str, Any]:
 
     seed = spec["seed"]
     cfg = eval_config(budget)
-    if (MODELS_DIR / SHIPPED["cbc-tp"]).is_file():
+    if is_shipped("cbc-tp"):
         policy, pursuers = load_pursuer_policy("cbc-tp", cfg)[0], "cbc-tp"
     else:
         policy, pursuers = PIDPotentialField(cfg), "pid-pf"

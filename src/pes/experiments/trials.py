@@ -138,11 +138,11 @@ def write_json(path: Path, obj: Any) -> None:
 
 def eval_config(budget: Budget, damaged: int = 0):
     """The paper's evaluation scenario (§V-B): disturbance on, damaged pursuers disabled, the
-    shipped DDPG evader (``flee`` if this installation has none)."""
-    from pes.algos.io import MODELS_DIR, SHIPPED  # noqa: PLC0415
+    shipped DDPG evader calibrated to the paper's (``flee`` if this installation has none)."""
+    from pes.algos.io import is_shipped  # noqa: PLC0415
     from pes.sim.config import EnvConfig  # noqa: PLC0415
 
-    evader = "ddpg" if (MODELS_DIR / SHIPPED["evader-ddpg"]).is_file() else "flee"
+    evader = "ddpg" if is_shipped(EnvConfig().evader_model) else "flee"
     return EnvConfig().for_evaluation(evader_policy=evader, damaged=damaged, **budget.eval_env)
 
 

@@ -18,6 +18,10 @@ from pes.errors import ConfigError
 Dynamics = Literal["quadrotor", "point_mass"]
 CrashMode = Literal["continue", "disable"]
 EVADER_POLICIES = ("flee", "random", "ddpg", "external")
+SHIPPED_EVADERS = ("evader-ddpg-paper", "evader-ddpg")
+"""Names of the DDPG evaders shipped with PES (``evader_model``): the one calibrated to the
+paper's (PID(PF) captures it about as often as the paper's PID(PF) caught its evader, 27.3 %)
+and the fully trained one (docs/algorithms/evader_ddpg.md)."""
 
 REWARD_KEYS = (
     "cooperation_weight",
@@ -48,9 +52,11 @@ class EnvConfig:
     """The evader's behaviour: ``flee`` (scripted), ``random``, ``ddpg`` (a trained, frozen
     DDPG evader: ``evader_model``), or ``external`` (its actions are passed to ``step``, e.g.
     to train an evader)."""
-    evader_model: str = "evader-ddpg"
+    evader_model: str = "evader-ddpg-paper"
     """With ``evader_policy="ddpg"``: the evader's policy file (``pes train --algo evader-ddpg``
-    writes ``policy.pt``), or ``evader-ddpg`` for the one shipped with PES."""
+    writes ``policy.pt``), or a shipped one: ``evader-ddpg-paper`` (the default: the snapshot of
+    training whose strength matches the paper's evader) or ``evader-ddpg`` (fully trained, far
+    stronger)."""
 
     # --- arena and buildings (§II-A) -------------------------------------------------------
     arena_width: float = 100.0
@@ -287,8 +293,12 @@ class EnvConfig:
                 f"got '{self.evader_policy}'"
             )
         model = self.evader_model
-        if self.evader_policy == "ddpg" and model != "evader-ddpg" and not Path(model).exists():
-            raise ConfigError(f"evader_model '{self.evader_model}' does not exist")
+        shipped_or_file = model in SHIPPED_EVADERS or Path(model).exists()
+        if self.evader_policy == "ddpg" and not shipped_or_file:
+            raise ConfigError(
+                f"evader_model must be {' or '.join(SHIPPED_EVADERS)} or an existing policy "
+                f"file, got '{model}'"
+            )
         if self.layout not in ("grid", "empty") and not Path(self.layout).is_file():
             raise ConfigError(
                 f"layout must be 'grid', 'empty' or an existing layout file, got '{self.layout}'"
