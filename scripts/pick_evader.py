@@ -37,6 +37,13 @@ PAPER_PID_PF_STEPS = 482.0
 """PID(PF)'s mean episode steps against the paper's DDPG evader (Table IV)."""
 
 
+def distance(row: dict, target: float, target_steps: float, max_steps: int) -> float:
+    """How far one snapshot's PID(PF) figures (``success_rate`` in [0, 1], ``mean_steps``) are
+    from the target pair: |success - target| + |steps - target_steps| / max_steps."""
+    steps = abs(row["mean_steps"] - target_steps) / max_steps
+    return abs(row["success_rate"] - target) + steps
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="an evader-ddpg run trained with snapshots=true")
@@ -73,11 +80,11 @@ def main() -> None:
             flush=True,
         )
 
-    def distance(row: dict) -> float:
-        steps = abs(row["mean_steps"] - args.target_steps) / base.max_steps
-        return abs(row["success_rate"] - args.target) + steps
+    def score(row: dict) -> tuple[float, int]:
+        gap = distance(row, args.target, args.target_steps, base.max_steps)
+        return gap, -row["episode"]
 
-    best = min(rows, key=lambda r: (distance(r), -r["episode"]))
+    best = min(rows, key=score)
     report = {
         "protocol": {
             "pursuers": "pid-pf",

@@ -45,6 +45,18 @@ def test_ship_file_of_a_checkpoint_keeps_the_acting_networks(tmp_path):
     assert cfg.seed == 3
 
 
+def test_pick_evader_prefers_the_paper_s_steps_to_a_crash_heavy_match():
+    """A snapshot caught as rarely as the paper's evader but in short, crash-ended episodes is
+    farther from the paper's pair (27.3 %, 482 steps) than one caught a little less often in
+    long episodes (the measured snapshots 46 and 70 of results/evader_snapshots.json)."""
+    pick = _script("pick_evader")
+    crashy = {"success_rate": 0.273, "mean_steps": 202.0}
+    long = {"success_rate": 0.243, "mean_steps": 444.0}
+    args = (pick.PAPER_PID_PF_SUCCESS, pick.PAPER_PID_PF_STEPS, 500)
+    assert pick.distance(long, *args) < pick.distance(crashy, *args)
+    assert pick.distance({"success_rate": 0.273, "mean_steps": 482.0}, *args) == 0.0
+
+
 def test_pick_swarm_screens_snapshots_and_confirms_the_best(tmp_path):
     _tiny_run(tmp_path / "run", snapshots=True, log_every=8)
     snaps = sorted((tmp_path / "run" / "snapshots").glob("ep*.pt"))
