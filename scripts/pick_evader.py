@@ -1,8 +1,9 @@
 """Choose the evader snapshot that matches the paper's calibration anchor.
 
-    pes train --algo evader-ddpg --set threads=1 --set snapshots=true --set log_every=25 \
-        --set time_limit=7 --set eval_episodes=0 --out runs/evader-snap
-    python scripts/pick_evader.py runs/evader-snap --out results/evader_snapshots.json
+    pes train --algo evader-ddpg --set threads=1 --set snapshots=true --set log_every=1 \
+        --set episodes=70 --set eval_episodes=0 --out runs/evader-fine
+    python scripts/pick_evader.py runs/evader-fine --min-episode 40 --max-episode 70 \
+        --out results/evader_snapshots.json
 
 The paper measures the strength of its frozen DDPG evader once: PID(PF) captures it in 27.3 %
 of the episodes, which last 482 steps on average (Table IV, disturbance on). This script

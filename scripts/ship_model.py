@@ -44,7 +44,11 @@ from pes.algos.io import (  # noqa: E402
 )
 from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
-from pes.experiments.calibration import EVADER_SPEEDS, evader_speed_case  # noqa: E402
+from pes.experiments.calibration import (  # noqa: E402
+    EVADER_SPEEDS,
+    PAPER_EVADER_CASE,
+    evader_speed_case,
+)
 from pes.policies import PIDPotentialField  # noqa: E402
 from pes.sim.bench import machine_info  # noqa: E402
 from pes.sim.config import SHIPPED_EVADERS, EnvConfig  # noqa: E402
@@ -79,9 +83,10 @@ def run(policy, cfg: EnvConfig, episodes: int, seed: int) -> dict:
     return result.summary()
 
 
-def pid_pf_by_speed() -> list[str]:
-    """Model-card lines: PID(PF) against the fully trained evader at the capped speeds, from
-    ``results/calibration.json`` (its own seed and command), if that file has them."""
+def pid_pf_lines() -> list[str]:
+    """Model-card lines: PID(PF) against the same evaders as the swarm -- the default one and
+    the fully trained one at the capped speeds -- from ``results/calibration.json`` (its own seed
+    and command), for the cases that file has."""
     path = ROOT / "results" / "calibration.json"
     if not path.is_file():
         return []
@@ -91,20 +96,29 @@ def pid_pf_by_speed() -> list[str]:
         for speed in EVADER_SPEEDS
         if evader_speed_case(speed) in rows
     ]
-    if not found:
+    parts = []
+    if PAPER_EVADER_CASE in rows:
+        parts.append(
+            f"against `evader-ddpg-paper` {100 * rows[PAPER_EVADER_CASE]['success_rate']:.1f} %"
+        )
+    if found:
+        parts.append(
+            "against `evader-ddpg` at "
+            + ", ".join(f"{speed:g} m/s {100 * row['success_rate']:.1f} %" for speed, row in found)
+        )
+    if not parts:
         return []
-    # Where the paper's PID(PF) figure falls on this evader's speed axis.
+    # Where the paper's PID(PF) figure falls on the fully trained evader's speed axis.
     bracket = [
-        f" The paper's {PAPER_PID_PF} % for PID(PF) lies between our evader at {slow:g} and "
+        f" The paper's {PAPER_PID_PF} % for PID(PF) lies between `evader-ddpg` at {slow:g} and "
         f"{fast:g} m/s."
         for (slow, a), (fast, b) in zip(found, found[1:])
         if a["success_rate"] >= PAPER_PID_PF / 100 > b["success_rate"]
     ]
     return [
         "",
-        "PID(PF) against the same evader (results/calibration.json, "
-        "`python -m pes.experiments.calibration`): "
-        + ", ".join(f"{speed:g} m/s {100 * row['success_rate']:.1f} %" for speed, row in found)
+        "PID(PF) (results/calibration.json, `python -m pes.experiments.calibration`): "
+        + "; ".join(parts)
         + "."
         + "".join(bracket[:1]),
     ]
@@ -213,7 +227,7 @@ def main() -> None:
             "Paper (Table VI, CBC-TP Net): "
             + ", ".join(f"{k} damaged {s} % / {t} steps" for k, (s, t) in PAPER_TABLE_VI.items())
             + ".",
-            *pid_pf_by_speed(),
+            *pid_pf_lines(),
         ]
     else:
         lines += ["", "Success rate here is the pursuers' (lower means a stronger evader)."]
