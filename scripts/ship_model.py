@@ -163,12 +163,11 @@ def main() -> None:
         evals["vs flee evader, 0 damaged"] = run(policy, cfg, args.episodes, args.seed)
         strong = evader.replace(evader_model="evader-ddpg")
         for speed in sorted(EVADER_SPEEDS, reverse=True):
-            if speed <= strong.evader_max_speed:
-                cfg = strong.replace(evader_max_speed=speed)
-                policy, _ = load_pursuer_policy(target, cfg)
-                evals[f"vs evader-ddpg at {speed:g} m/s, 0 damaged"] = run(
-                    policy, cfg, args.episodes, args.seed
-                )
+            cfg = strong.replace(evader_max_speed=speed)
+            policy, _ = load_pursuer_policy(target, cfg)
+            evals[f"vs evader-ddpg at {speed:g} m/s, 0 damaged"] = run(
+                policy, cfg, args.episodes, args.seed
+            )
 
     machine = machine_info()
     meta = info["meta"]

@@ -26,10 +26,10 @@ from pes.record.viewer import ASSETS, DEFAULT_BUILDING_HEIGHT, scene_data
 def record_path(tmp_path_factory) -> Path:
     """A real short episode: the shipped swarm (with its predictions) or PID(PF), one damaged
     pursuer, crashes allowed to end the episode."""
-    from pes.cli import _shipped
+    from pes.algos.io import is_shipped
 
     path = tmp_path_factory.mktemp("view") / "episode.json"
-    policy = "cbc-tp" if _shipped("cbc-tp") else "pid-pf"
+    policy = "cbc-tp" if is_shipped("cbc-tp") else "pid-pf"
     argv = ["render", "--policy", policy, "--out", str(path), "--seed", "3"]
     assert main([*argv, "--set", "max_steps=60", "--set", "damaged=1"]) == 0
     return path

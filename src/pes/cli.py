@@ -81,16 +81,12 @@ def _non_negative(text: str) -> int:
     return value
 
 
-def _shipped(name: str) -> bool:
-    from pes.algos.io import is_shipped
-
-    return is_shipped(name)
-
-
 def _opponent() -> dict[str, Any]:
     """The default evader of evaluations: the shipped DDPG evader calibrated to the paper's, as
     in the paper (``flee`` if this installation has none)."""
-    return {"evader_policy": "ddpg"} if _shipped(EnvConfig().evader_model) else {}
+    from pes.algos.io import default_evader_policy
+
+    return {"evader_policy": default_evader_policy()}
 
 
 # --- policies --------------------------------------------------------------------------------
@@ -150,12 +146,13 @@ def _test_scenario(args: argparse.Namespace) -> EnvConfig:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from pes.algos.io import is_shipped
     from pes.record import save_gif, save_record
 
     start = time.time()
     config = _scenario(args, disturbance=True, crash_mode="disable", **_opponent())
     if args.policy is None:
-        args.policy = "cbc-tp" if _shipped("cbc-tp") else "pid-pf"
+        args.policy = "cbc-tp" if is_shipped("cbc-tp") else "pid-pf"
     out = Path(args.out)
     record = _run_episode(config, args.policy, args.seed)
     record_path = save_record(record, out / "episode.json")

@@ -19,24 +19,27 @@ import torch
 from torch import nn
 
 from pes.errors import CheckpointError
+from pes.sim.config import SHIPPED_EVADERS, EnvConfig
 
 CHECKPOINT_FORMAT = "pes-checkpoint"
 POLICY_FORMAT = "pes-policy"
 VERSION = 1
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 """Where the shipped policy files and their model cards live."""
-SHIPPED = {
-    "cbc-tp": "cbc_tp.pt",
-    "evader-ddpg-paper": "evader_ddpg_paper.pt",
-    "evader-ddpg": "evader_ddpg.pt",
-}
-"""Shipped policy files by name: the CBC-TP Net swarm, the DDPG evader calibrated to the
-paper's (the default opponent, ``EnvConfig.evader_model``) and the fully trained DDPG evader."""
+SHIPPED = {name: f"{name.replace('-', '_')}.pt" for name in ("cbc-tp", *SHIPPED_EVADERS)}
+"""Shipped policy files by name: the CBC-TP Net swarm and the DDPG evaders of
+:data:`pes.sim.config.SHIPPED_EVADERS` (``cbc-tp`` -> ``cbc_tp.pt``)."""
 
 
 def is_shipped(name: str) -> bool:
     """Whether this installation holds the shipped model ``name`` (a key of :data:`SHIPPED`)."""
     return (MODELS_DIR / SHIPPED[name]).is_file()
+
+
+def default_evader_policy() -> str:
+    """The evader of every evaluation: ``ddpg`` (the default ``EnvConfig.evader_model``) if this
+    installation holds that evader, ``flee`` if not."""
+    return "ddpg" if is_shipped(EnvConfig().evader_model) else "flee"
 
 
 def save_atomic(obj: dict[str, Any], path: str | Path) -> None:

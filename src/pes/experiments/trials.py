@@ -139,11 +139,12 @@ def write_json(path: Path, obj: Any) -> None:
 def eval_config(budget: Budget, damaged: int = 0):
     """The paper's evaluation scenario (§V-B): disturbance on, damaged pursuers disabled, the
     shipped DDPG evader calibrated to the paper's (``flee`` if this installation has none)."""
-    from pes.algos.io import is_shipped  # noqa: PLC0415
+    from pes.algos.io import default_evader_policy  # noqa: PLC0415
     from pes.sim.config import EnvConfig  # noqa: PLC0415
 
-    evader = "ddpg" if is_shipped(EnvConfig().evader_model) else "flee"
-    return EnvConfig().for_evaluation(evader_policy=evader, damaged=damaged, **budget.eval_env)
+    return EnvConfig().for_evaluation(
+        evader_policy=default_evader_policy(), damaged=damaged, **budget.eval_env
+    )
 
 
 def evaluations(spec: dict) -> dict[str, int]:
