@@ -127,26 +127,25 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    rows = []
+    out = Path(args.out or f"benchmarks/results/train_{args.device}.json")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result = {
+        "machine": machine_info(args.device),
+        "results": [],
+        "command": "python benchmarks/bench_train.py "
+        + " ".join(
+            f"--{k.replace('_', '-')} {' '.join(v) if isinstance(v, list) else v}"
+            for k, v in vars(args).items()
+            if v is not None and k != "out"
+        ),
+    }
     for algo in args.algos:
         for preset in args.presets:
             row = measure(algo, preset, args.device, args.seconds)
             print(json.dumps(row), flush=True)
-            rows.append(row)
-    result = {
-        "machine": machine_info(args.device),
-        "results": rows,
-        "command": "python benchmarks/bench_train.py "
-        + " ".join(
-            f"--{k.replace('_', '-')} {v}"
-            for k, v in vars(args).items()
-            if v is not None and k not in ("algos", "presets")
-        ),
-    }
-    out = Path(args.out or f"benchmarks/results/train_{args.device}.json")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(json.dumps(result))
+            result["results"].append(row)
+            # written after every row, so that a run stopped early keeps what it measured
+            out.write_text(json.dumps(result, indent=2) + "\n")
 
 
 if __name__ == "__main__":

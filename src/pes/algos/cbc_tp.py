@@ -348,7 +348,9 @@ class CBCTP:
             new_action = torch.where(alive.unsqueeze(-1), torch.tanh(pre), action)
             acting = alive
         else:
-            pick = torch.multinomial(alive.float() + 1e-6, 1, generator=gen).squeeze(1)
+            # the sampler's generator lives on the CPU (one RNG stream whatever the device)
+            weights = alive.float().cpu() + 1e-6
+            pick = torch.multinomial(weights, 1, generator=gen).squeeze(1).to(state.device)
             b = torch.arange(len(row), device=state.device)
             rel = None if rel is None else rel[b, pick]
             pre = self.actor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
