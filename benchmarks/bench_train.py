@@ -88,6 +88,7 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
         "hidden": cfg.hidden,
         "batch_size": cfg.batch_size,
         "update_every": cfg.update_every,
+        "env_compiled": env.compiled,
         "collect_env_steps_per_s": round(collect_rate, 1),
         "update_ms": round(update_s * 1000, 2),
         "tp_update_ms": round(tp_s * 1000, 2) if tp_time else None,

@@ -28,4 +28,19 @@ def test_compiled_step_matches_eager_through_resets():
         assert torch.equal(a[2], b[2]) and torch.equal(a[3], b[3])
         resets += int((a[2] | a[3]).sum())
     assert resets >= 16  # the auto-reset pass ran, compiled
-    assert not fused._step_fn.failed and not fused._reset_fn.failed
+    assert fused.compiled and not eager.compiled  # no silent fall-back to eager
+
+
+def test_a_broken_compiler_falls_back_to_eager_and_says_so():
+    env = pes.make_env(num_envs=2, seed=0, compile=True)
+    assert env.compiled
+
+    def broken(*args):
+        raise RuntimeError("no compiler here")
+
+    env._step_fn.fused = broken  # what a machine without a working compiler does
+    env.reset()
+    with pytest.warns(UserWarning, match="running eagerly"):
+        obs, *_ = env.step(torch.zeros(2, 5, 2))
+    assert torch.isfinite(obs).all()
+    assert not env.compiled

@@ -17,6 +17,7 @@ import pes
 from pes.algos.buffer import ReplayBuffer
 from pes.algos.cbc_tp import CBCTP, exit_charge
 from pes.algos.config import build_train_config
+from pes.algos.evader_ddpg import EvaderDDPG
 from pes.algos.features import frames, pursuer_obs
 from pes.algos.io import save_atomic
 from pes.algos.nets import CBCActor, CBCCritic, TPNet
@@ -24,6 +25,7 @@ from pes.algos.policy import load_pursuer_policy
 from pes.algos.trainer import init_networks, train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
+from pes.sim.layout import make_layout
 from tests.learning import FAST, assert_learns
 
 
@@ -429,3 +431,12 @@ def test_ddpg_evader_trains_and_plays_inside_the_env(tmp_path, capsys):
                 evader_policy="ddpg", evader_model=str(tmp_path / "pursuers" / "policy.pt")
             )
         )
+
+
+def test_the_evader_trains_against_pid_pf_on_its_own_map():
+    env_cfg = pes.EnvConfig(removed_blocks=[], pursuer_max_speed=8.0)
+    learner = EvaderDDPG(build_train_config("evader-ddpg", "tiny", FAST), env_cfg, "cpu")
+    boxes = len(make_layout(env_cfg).boxes)
+    assert boxes != len(make_layout(pes.EnvConfig()).boxes)
+    assert len(learner.pursuers.boxes) == boxes
+    assert learner.pursuers.env_config.pursuer_max_speed == 8.0

@@ -160,11 +160,8 @@ class ReplayBuffer:
 
     # --- checkpoints ---------------------------------------------------------------------------
     def state_dict(self) -> dict:
-        n = self.filled
-        if self.filled < self.rows:
-            data = {k: v[:n].clone() for k, v in self.data.items()}
-        else:
-            data = {k: v.clone() for k, v in self.data.items()}
+        # a copy in host memory, whatever the buffer's device
+        data = {k: v[: self.filled].to("cpu", copy=True) for k, v in self.data.items()}
         return {
             "rows": self.rows,
             "num_envs": self.num_envs,

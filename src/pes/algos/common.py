@@ -15,6 +15,10 @@ def target_copy(net: nn.Module) -> nn.Module:
     target = copy.deepcopy(net)
     for p in target.parameters():
         p.requires_grad_(False)
+    for m in target.modules():
+        if isinstance(m, nn.RNNBase):
+            # deepcopy clones weight by weight: put them back in one block for cuDNN
+            m.flatten_parameters()
     return target
 
 

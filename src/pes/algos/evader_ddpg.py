@@ -37,7 +37,7 @@ class EvaderDDPG:
         self.critic_target = target_copy(self.critic)
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
         self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
-        self.pursuers = SCRIPTED[cfg.opponent]()
+        self.pursuers = SCRIPTED[cfg.opponent](env_cfg)
         self.buffer = ReplayBuffer(
             cfg.buffer_size,
             cfg.num_envs,

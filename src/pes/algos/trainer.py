@@ -423,7 +423,7 @@ def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: b
         opponent = env_cfg.evader_policy
     else:
         env_cfg = env_cfg.replace(evader_policy="ddpg", evader_model=str(policy_path))
-        policy = SCRIPTED[cfg.opponent]()
+        policy = SCRIPTED[cfg.opponent](env_cfg)
         opponent = cfg.opponent
     result = evaluate(
         policy,

@@ -74,7 +74,6 @@ class PursuitEvasionEnv:
         def reset_fn(state: dict[str, Tensor], views: dict[str, Tensor], pending: Tensor):
             return scenario.reset_pass(sc, state, views, pending, self.reset_capacity)
 
-        self.compiled = bool(compile)
         self._step_fn = _Fused(step_fn) if compile else step_fn
         self._reset_fn = _Fused(reset_fn) if compile else reset_fn
         self.state: dict[str, Tensor] | None = None
@@ -123,6 +122,14 @@ class PursuitEvasionEnv:
         return float(self.scenario.params.max_speed[-1])
 
     # --- the API --------------------------------------------------------------------------------
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the step and the reset pass run fused by ``torch.compile`` (False when it was
+        not asked for, or when compilation failed here and the env fell back to eager)."""
+        fns = (self._step_fn, self._reset_fn)
+        return all(isinstance(f, _Fused) and not f.failed for f in fns)
+
     def reset(self, seed: int | None = None) -> tuple[Tensor, dict[str, Tensor]]:
         """Start a new episode in every environment.
 
