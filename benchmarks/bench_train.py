@@ -27,7 +27,7 @@ import torch
 from pes.algos import ALGOS
 from pes.algos.config import build_train_config
 from pes.sim.bench import machine_info
-from pes.sim.env import make_env
+from pes.sim.env import make_env, resolve_device
 
 
 def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
@@ -126,6 +126,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=0)
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
+    resolve_device(args.device)  # a clear error for a device this machine lacks
     if args.threads:
         torch.set_num_threads(args.threads)
     out = Path(args.out or f"benchmarks/results/train_{args.device}.json")

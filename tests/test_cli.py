@@ -179,10 +179,12 @@ def test_bench(capsys):
         (["render", "--policy", "pid-pf", "--out", "x.avi"], ".png or .json"),
         (["render", "--record", "missing.json", "--out", "x.png"], "not found"),
         (["eval", "--policy", "pid-pf", "--device", "cuda:9"], "cuda"),
+        # a trained policy is checked before its networks are moved to the device
+        (["eval", "--policy", "cbc-tp", "--device", "cuda"], "cuda"),
     ],
 )
 def test_user_mistakes(argv, message, capsys):
-    if "cuda:9" in argv:
+    if any(a.startswith("cuda") for a in argv):
         import torch
 
         if torch.cuda.is_available():

@@ -19,6 +19,7 @@ from pes import __version__
 from pes.config import load_yaml, parse_override
 from pes.errors import ConfigError, PESError
 from pes.sim.config import EnvConfig
+from pes.sim.env import resolve_device
 
 EXIT_USER_ERROR = 2
 
@@ -643,6 +644,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        if getattr(args, "device", None) is not None:
+            resolve_device(args.device)  # before any network is moved there
         return args.func(args)
     except PESError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -58,7 +58,7 @@ class PursuitEvasionEnv:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ConfigError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.num_envs = num_envs
-        self.device = _resolve_device(device)
+        self.device = resolve_device(device)
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
             raise ConfigError(f"seed must be an integer, got {seed!r}")
         self._seed = seed if seed is not None else secrets.randbits(31)
@@ -275,7 +275,9 @@ class PursuitEvasionEnv:
         self.state = {k: v.to(self.device).clone() for k, v in state.items()}
 
 
-def _resolve_device(device: str | torch.device) -> torch.device:
+def resolve_device(device: str | torch.device) -> torch.device:
+    """``device`` as a torch.device, or a ConfigError naming what is wrong with it (unknown,
+    not cpu/cuda, or cuda on a machine without a CUDA GPU)."""
     try:
         dev = torch.device(device)
     except (RuntimeError, TypeError):
