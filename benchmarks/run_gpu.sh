@@ -1,12 +1,12 @@
 #!/bin/bash
-# The GPU measurements, in one go (about 9 minutes on one H200):
+# The GPU measurements, in one go (at most about 12 minutes: the sum of the parts' time limits):
 #
 #     bash benchmarks/run_gpu.sh [OUT]      # OUT: where the JSON files go (default
 #                                           # benchmarks/results); the log is OUT/gpu_log.txt
 #
 # 1. the CUDA tests of the simulator;
 # 2. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
-# 3. a real quick-preset training on the GPU, killed by its time limit and resumed
+# 3. a real quick-preset training on the GPU, stopped by its time limit and resumed
 #    (train_quick_cuda*.json, the progress log);
 # 4. the shipped swarm evaluated on the GPU (eval_cuda.json; compare its model card, measured
 #    on a CPU: the same statistics, not the same episodes);
