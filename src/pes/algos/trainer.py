@@ -49,7 +49,7 @@ from pes.algos.io import (
 from pes.config import save_yaml, to_dict
 from pes.errors import CheckpointError, ConfigError
 from pes.evaluate import evaluate
-from pes.sim.env import make_env
+from pes.sim.env import make_env, resolve_device
 
 LOG_COLUMNS = (
     "episodes",
@@ -187,9 +187,7 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
-    device = torch.device(cfg.device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ConfigError("device 'cuda' asked for, but no CUDA GPU is available")
+    device = resolve_device(cfg.device)
 
     torch.manual_seed(cfg.seed)
     learner_cls = ALGOS[cfg.algo]
