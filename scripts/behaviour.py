@@ -12,7 +12,11 @@ policy, where the evader is: the share of steps it is slower than 4 m/s or withi
 obstacle, the share of steps with at least 1 / 3 alive pursuers within 2 m and within 5 m of it,
 and its median speed (m/s) and distance to its nearest obstacle (m) ``LOOKBACK`` steps before
 each capture (a capture needs 3 pursuers within 2 m for 5 steps, so it is where the evader is
-held up). ``--evader-speed`` caps the evader's speed (m/s; default: the scenario's 12).
+held up); and, per policy, where the time of a capture goes: the median step of the captured
+episodes at which a pursuer first came within 2 m of the evader, three within 5 m, three within
+2 m, and the capture itself, and the share of the steps between "three within 5 m" and "three
+within 2 m" in which the evader was within 2 m of an obstacle. ``--evader-speed`` caps the
+evader's speed (m/s; default: the scenario's 12).
 """
 
 from __future__ import annotations
@@ -52,6 +56,10 @@ def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[st
     evader_steps = 0
     past = []  # the evader's (speed m/s, obstacle distance m) per step, (E,) each
     at_capture = []  # (speed, obstacle distance) LOOKBACK steps before each capture
+    # First step (-1: not yet) with >= 1 pursuer within 2 m, >= 3 within 5 m, >= 3 within 2 m.
+    first = torch.full((episodes, 3), -1, dtype=torch.long)
+    closing = torch.zeros(episodes, 2)  # steps between 3 within 5 m and 3 within 2 m; at a wall
+    phases = []  # per capture: the three first steps, the capture step, closing steps at a wall
     with torch.no_grad():
         for t in range(cfg.max_steps):
             obs, _, terminated, truncated, info = env.step(policy(obs, info))
@@ -83,8 +91,14 @@ def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[st
             evader_counts += flags[running].float().sum(0)
             evader_steps += int(running.sum())
             then = past[max(0, t - LOOKBACK)]
+            reached = torch.stack([near2 >= 1, near5 >= 3, near2 >= 3], dim=-1) & running[:, None]
+            first = torch.where(reached & (first < 0), t, first)
+            in_closing = running & (first[:, 1] >= 0) & (first[:, 2] < 0)
+            closing[:, 0] += in_closing.float()
+            closing[:, 1] += (in_closing & (ev_wall < 2.0)).float()
             for e in (info["success"] & running).nonzero()[:, 0].tolist():
                 at_capture.append((float(then[0][e]), float(then[1][e])))
+                phases.append((*first[e].tolist(), t, *closing[e].tolist()))
             a = alive.float()
             k = a.sum(-1).clamp(min=1)
             centroid = (pos * a[..., None]).sum(1) / k[:, None]
@@ -104,6 +118,9 @@ def measure(name: str, episodes: int, seed: int, evader_speed: float) -> dict[st
     out["evader"] = (evader_counts / max(evader_steps, 1)).tolist()
     captured = torch.tensor(at_capture).reshape(-1, 2)
     out["captures"] = [len(at_capture), *captured.median(0).values.tolist()] if at_capture else [0]
+    phase = torch.tensor(phases, dtype=torch.float).reshape(-1, 6)
+    at_wall = phase[:, 5].sum() / phase[:, 4].sum().clamp(min=1)
+    out["phases"] = [*phase[:, :4].median(0).values.tolist(), float(at_wall)] if phases else []
     return out
 
 
@@ -117,11 +134,12 @@ def main() -> None:
     torch.set_num_threads(1)
     print("| policy | steps | speed (m/s) | mean distance (m) | nearest (m) | spread (m) |")
     print("| --- | --- | --- | --- | --- | --- |")
-    crash_rows, evader_rows = [], []
+    crash_rows, evader_rows, phase_rows = [], [], []
     for name in args.policies:
         stats = measure(name, args.episodes, args.seed, args.evader_speed)
         crash_rows.append((name, stats["crashes"]))
         evader_rows.append((name, stats["evader"], stats["captures"]))
+        phase_rows.append((name, stats["phases"]))
         for i, (a, b) in enumerate(WINDOWS):
             print(
                 f"| {name} | {a}-{b - 1} | {stats['speed'][i]:.1f} | {stats['dist'][i]:.1f} "
@@ -148,6 +166,18 @@ def main() -> None:
             f"| {name} | {pct[0]} | {pct[1]} | {pct[2]} / {pct[3]} | {pct[4]} / {pct[5]} "
             f"| {captures[0]} | {before} |"
         )
+    print()
+    print(
+        "| policy | first pursuer within 2 m | 3 within 5 m | 3 within 2 m | capture "
+        "| evader within 2 m of an obstacle while 3 close from 5 m to 2 m |"
+    )
+    print("| --- | --- | --- | --- | --- | --- |")
+    for name, row in phase_rows:
+        if row:
+            steps = " | ".join(f"{x:.0f}" for x in row[:4])
+            print(f"| {name} | {steps} | {100 * row[4]:.1f} % |")
+        else:
+            print(f"| {name} | - | - | - | - | - |")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""The maintenance scripts under scripts/ that pick and ship trained policies."""
+"""The maintenance scripts under scripts/ that pick, ship and study trained policies."""
 
 from __future__ import annotations
 
@@ -80,3 +80,14 @@ def test_pick_swarm_screens_snapshots_and_confirms_the_best(tmp_path):
         [*argv, "--seed", "0", "--out", str(out)], capture_output=True, text=True, timeout=120
     )
     assert proc.returncode != 0 and "seed 0" in proc.stderr
+
+
+def test_behaviour_times_the_phases_of_a_capture_in_order():
+    stats = _script("behaviour").measure("pid-pf", episodes=16, seed=0, evader_speed=12.0)
+    captures = stats["captures"][0]
+    assert captures >= 1  # PID(PF) catches the default evader in about a quarter of episodes
+    first_near, three_within_5, three_within_2, capture, at_wall = stats["phases"]
+    # a capture needs three pursuers within 2 m for 5 steps: each phase follows the one before
+    assert 0 <= first_near <= three_within_2 and 0 <= three_within_5 <= three_within_2
+    assert three_within_2 + 4 <= capture < 500
+    assert 0.0 <= at_wall <= 1.0
