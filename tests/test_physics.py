@@ -9,6 +9,7 @@ import pytest
 import torch
 
 import pes
+from pes.errors import ConfigError
 from pes.sim.dynamics import Vehicles, attitude_gains, quadrotor_step
 from pes.sim.geometry import nearest_obstacle, ray_distance
 from pes.sim.scenario import softplus_obstacle_term
@@ -309,3 +310,25 @@ def test_intercept_lead_charges_all_but_the_nearest_pursuer_their_distance_to_th
     to_lead = torch.tensor([d[0], 51.0, math.hypot(21.0, 30.0)])
     assert torch.allclose(d, torch.tensor([9.0, 31.0, math.hypot(1.0, 30.0)]), atol=1e-3)
     assert torch.allclose(shaped - paper, -0.5 * rho * (to_lead - d), atol=1e-5)
+
+
+def test_approach_term_charges_speed_towards_a_near_wall_not_nearness():
+    """``approach_weight`` w charges w x the speed towards the nearest obstacle x (1 - d / d_a)
+    within ``approach_distance`` d_a: nothing at rest near a wall, nothing flying away from it,
+    nothing beyond d_a, and the paper's reward when w = 0."""
+
+    def first_reward(x0, vx0, weight):
+        # Pursuer 0 at (x0, 50) flying at vx0 m/s; two more at rest by the evader at (50, 50).
+        x, y = torch.tensor([[x0, 50.0, 50.0, 50.0]]), torch.tensor([[50.0, 60.0, 40.0, 50.0]])
+        vx = torch.tensor([[vx0, 0.0, 0.0, 0.0]])
+        rewards, _ = one_step_rewards(x, y, vx, approach_weight=weight, approach_distance=2.0)
+        return rewards[0].item()
+
+    # 1 m from the arena's west wall (x = 0): at rest, or flying away from it; 10 m from it.
+    for x0, vx0 in ((1.0, 0.0), (1.0, 4.0), (10.0, -4.0)):
+        assert first_reward(x0, vx0, 0.5) == pytest.approx(first_reward(x0, vx0, 0.0), abs=1e-6)
+    # Towards the wall at 4 m/s from 1 m: a step of 0.1 s ends 0.6 m from it, so 0.5 x 4 x 0.7.
+    charged = first_reward(1.0, -4.0, 0.0) - first_reward(1.0, -4.0, 0.5)
+    assert charged == pytest.approx(1.4, abs=0.02)
+    with pytest.raises(ConfigError, match="approach_weight"):
+        pes.EnvConfig(approach_weight=-1.0).validate()

@@ -32,6 +32,8 @@ REWARD_KEYS = (
     "capture_reward",
     "encirclement_weight",
     "intercept_lead",
+    "approach_weight",
+    "approach_distance",
     "evader_capture_reward",
     "evader_crash_reward",
 )
@@ -184,6 +186,14 @@ class EnvConfig:
     keeps its distance to the evader; every other one is charged its distance to the point the
     evader reaches in ``intercept_lead`` seconds at its current velocity (s), so that the rest
     of the swarm is paid for cutting the evader off rather than trailing it. A training aid."""
+    approach_weight: float = 0.0
+    """Not in the paper (0 = its reward): every alive pursuer within ``approach_distance`` of an
+    obstacle is charged weight x its speed towards that obstacle (m/s) x (1 - distance /
+    ``approach_distance``) each step (weight in s/m). It charges flying into a wall rather than
+    being near one, so that a training run may lower ``safe_distance`` (and let the pursuers
+    reach an evader waiting at a wall) without paying for it in crashes. A training aid."""
+    approach_distance: float = 2.0
+    """Range (m) of the ``approach_weight`` term: obstacles further than this cost nothing."""
     evader_capture_reward: float = -5.0
     """Reward of the evader on the step of capture."""
     evader_crash_reward: float = -2.0
@@ -212,6 +222,7 @@ class EnvConfig:
             "attitude_bandwidth",
             "attitude_damping",
             "softplus_k",
+            "approach_distance",
             "max_tilt_deg",
             "pursuer_spawn_band",
             "evader_spawn_radius",
@@ -231,6 +242,7 @@ class EnvConfig:
             "self_weight",
             "encirclement_weight",
             "intercept_lead",
+            "approach_weight",
         ]
         for name in non_negative:
             value = getattr(self, name)

@@ -454,6 +454,11 @@ def advance(
     crashed = contact[:, :n] & alive0
     # Pursuers that crash stop; the evader loses only the velocity into the obstacle.
     inward = (moved.vx * nx + moved.vy * ny).clamp(max=0.0)
+    if cfg.approach_weight:
+        # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle,
+        # before the contact stops it, weighted by how near that obstacle is.
+        nearness = (1.0 - dist[:, :n] / cfg.approach_distance).clamp(min=0.0)
+        approach_term = cfg.approach_weight * (-inward[:, :n]) * nearness
     is_pursuer = torch.arange(n + 1, device=x.device) < n
     stop = contact & is_pursuer
     slide = contact & ~is_pursuer
@@ -492,6 +497,8 @@ def advance(
         chaser = alive0 & (distances == nearest_gap)
         own_distance = torch.where(chaser, distances, to_lead)
     r_self = -(cfg.self_weight * rho * own_distance + obstacle_term)
+    if cfg.approach_weight:
+        r_self = r_self - approach_term
     reward = r_co + r_self
     if cfg.encirclement_weight:
         # Not in the paper: how one-sided the alive pursuers are, seen from the evader -- the
