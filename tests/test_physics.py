@@ -312,23 +312,24 @@ def test_intercept_lead_charges_all_but_the_nearest_pursuer_their_distance_to_th
     assert torch.allclose(shaped - paper, -0.5 * rho * (to_lead - d), atol=1e-5)
 
 
-def test_approach_term_charges_speed_towards_a_near_wall_not_nearness():
-    """``approach_weight`` w charges w x the speed towards the nearest obstacle x (1 - d / d_a)
-    within ``approach_distance`` d_a: nothing at rest near a wall, nothing flying away from it,
-    nothing beyond d_a, and the paper's reward when w = 0."""
+def test_approach_term_charges_speed_towards_a_wall_beyond_braking_not_nearness():
+    """``approach_weight`` w charges w x (the speed towards the nearest obstacle - the speed
+    sqrt(2 a g) from which the pursuer stops within its gap g at ``approach_decel`` a): nothing
+    at rest near a wall, flying away from it, or towards a far one; the paper's reward at w = 0."""
 
     def first_reward(x0, vx0, weight):
         # Pursuer 0 at (x0, 50) flying at vx0 m/s; two more at rest by the evader at (50, 50).
         x, y = torch.tensor([[x0, 50.0, 50.0, 50.0]]), torch.tensor([[50.0, 60.0, 40.0, 50.0]])
         vx = torch.tensor([[vx0, 0.0, 0.0, 0.0]])
-        rewards, _ = one_step_rewards(x, y, vx, approach_weight=weight, approach_distance=2.0)
+        rewards, _ = one_step_rewards(x, y, vx, approach_weight=weight, approach_decel=2.5)
         return rewards[0].item()
 
-    # 1 m from the arena's west wall (x = 0): at rest, or flying away from it; 10 m from it.
+    # 1 m from the arena's west wall (x = 0): at rest, or flying away; 10 m from it, towards it.
     for x0, vx0 in ((1.0, 0.0), (1.0, 4.0), (10.0, -4.0)):
         assert first_reward(x0, vx0, 0.5) == pytest.approx(first_reward(x0, vx0, 0.0), abs=1e-6)
-    # Towards the wall at 4 m/s from 1 m: a step of 0.1 s ends 0.6 m from it, so 0.5 x 4 x 0.7.
+    # Towards the wall at 4 m/s from 1 m: a step of 0.1 s ends 0.6 m from it, a gap of 0.3 m
+    # past the 0.3 m body radius, brakeable from sqrt(2 x 2.5 x 0.3) m/s.
     charged = first_reward(1.0, -4.0, 0.0) - first_reward(1.0, -4.0, 0.5)
-    assert charged == pytest.approx(1.4, abs=0.02)
+    assert charged == pytest.approx(0.5 * (4.0 - math.sqrt(1.5)), abs=0.02)
     with pytest.raises(ConfigError, match="approach_weight"):
         pes.EnvConfig(approach_weight=-1.0).validate()

@@ -33,7 +33,7 @@ REWARD_KEYS = (
     "encirclement_weight",
     "intercept_lead",
     "approach_weight",
-    "approach_distance",
+    "approach_decel",
     "evader_capture_reward",
     "evader_crash_reward",
 )
@@ -187,13 +187,15 @@ class EnvConfig:
     evader reaches in ``intercept_lead`` seconds at its current velocity (s), so that the rest
     of the swarm is paid for cutting the evader off rather than trailing it. A training aid."""
     approach_weight: float = 0.0
-    """Not in the paper (0 = its reward): every alive pursuer within ``approach_distance`` of an
-    obstacle is charged weight x its speed towards that obstacle (m/s) x (1 - distance /
-    ``approach_distance``) each step (weight in s/m). It charges flying into a wall rather than
-    being near one, so that a training run may lower ``safe_distance`` (and let the pursuers
-    reach an evader waiting at a wall) without paying for it in crashes. A training aid."""
-    approach_distance: float = 2.0
-    """Range (m) of the ``approach_weight`` term: obstacles further than this cost nothing."""
+    """Not in the paper (0 = its reward): every alive pursuer is charged weight x the speed
+    (m/s) at which it flies towards its nearest obstacle beyond the speed from which it could
+    still stop before touching it, sqrt(2 x ``approach_decel`` x its gap), each step (weight in
+    s/m). It charges flying into a wall rather than being near one, so that a training run may
+    lower ``safe_distance`` (and let the pursuers reach an evader waiting at a wall) without
+    paying for it in crashes. A training aid."""
+    approach_decel: float = 2.5
+    """Deceleration (m/s^2) the ``approach_weight`` term allows for stopping: half the pursuers'
+    top acceleration by default, a margin for the attitude's lag and the disturbance."""
     evader_capture_reward: float = -5.0
     """Reward of the evader on the step of capture."""
     evader_crash_reward: float = -2.0
@@ -222,7 +224,7 @@ class EnvConfig:
             "attitude_bandwidth",
             "attitude_damping",
             "softplus_k",
-            "approach_distance",
+            "approach_decel",
             "max_tilt_deg",
             "pursuer_spawn_band",
             "evader_spawn_radius",

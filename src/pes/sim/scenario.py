@@ -455,10 +455,11 @@ def advance(
     # Pursuers that crash stop; the evader loses only the velocity into the obstacle.
     inward = (moved.vx * nx + moved.vy * ny).clamp(max=0.0)
     if cfg.approach_weight:
-        # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle,
-        # before the contact stops it, weighted by how near that obstacle is.
-        nearness = (1.0 - dist[:, :n] / cfg.approach_distance).clamp(min=0.0)
-        approach_term = cfg.approach_weight * (-inward[:, :n]) * nearness
+        # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle
+        # (before the contact stops it) above the speed it could still brake from in its gap.
+        gap = (dist[:, :n] - cfg.body_radius).clamp(min=0.0)
+        brakeable = torch.sqrt(2.0 * cfg.approach_decel * gap)
+        approach_term = cfg.approach_weight * (-inward[:, :n] - brakeable).clamp(min=0.0)
     is_pursuer = torch.arange(n + 1, device=x.device) < n
     stop = contact & is_pursuer
     slide = contact & ~is_pursuer
