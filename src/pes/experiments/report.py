@@ -62,7 +62,7 @@ def _header(title: str, meta: dict) -> list[str]:
         "",
         f"Budget `{meta['budget']}`, {meta['seeds']} seed(s); each evaluation "
         f"{meta['eval_episodes']} episodes with disturbance, crashes disable, against the "
-        f"{meta['evader']} evader. Mean ± std over seeds. Made by `{meta['command']}` "
+        f"{meta['evader']}. Mean ± std over seeds. Made by `{meta['command']}` "
         f"({meta['hardware']}).",
         "",
     ]
@@ -105,7 +105,7 @@ def table5(specs: list[dict], done: dict, meta: dict) -> str | None:
     lines[2] = (
         f"Budget `{meta['budget']}`, {len(recs)} seed(s): TP Net (horizon 5) trained on "
         f"{recs[0]['train_windows']} windows of {recs[0]['pursuers']} pursuers against the "
-        f"{meta['evader']} evader, measured on {recs[0]['test_windows']} held-out windows. "
+        f"{meta['evader']}, measured on {recs[0]['test_windows']} held-out windows. "
         "Errors in arena units (metres / arena side); see pes.experiments.tpnet. "
         f"Made by `{meta['command']}` ({meta['hardware']})."
     )
@@ -327,7 +327,9 @@ def write_report(
         "seeds": seeds,
         "eval_episodes": BUDGETS[budget].eval_episodes,
         "evader": (
-            f"DDPG (`{cfg.evader_model}`)" if cfg.evader_policy == "ddpg" else cfg.evader_policy
+            f"DDPG evader `{cfg.evader_model}`"
+            if cfg.evader_policy == "ddpg"
+            else f"`{cfg.evader_policy}` evader"
         ),
         "command": command or f"pes reproduce {target} --budget {budget} --seeds {seeds}",
         "hardware": f"{machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']}",
