@@ -26,7 +26,10 @@ pytest.importorskip("onnxruntime")
 from pes.record.onnx_export import export_onnx, onnx_session, other_rows  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-TOL = 1e-5
+TOL = 5e-5
+"""Largest action difference allowed between onnxruntime and PyTorch: float32 rounding, which
+grows with the pursuers the bidirectional LSTM runs across (the swarm shipped on 2026-11-30:
+4.7e-6, 7.8e-6 and 1.4e-5 with 3, 5 and 8 pursuers; docs/export.md)."""
 
 
 def _cli_json(*argv: str) -> dict:
