@@ -454,12 +454,6 @@ def advance(
     crashed = contact[:, :n] & alive0
     # Pursuers that crash stop; the evader loses only the velocity into the obstacle.
     inward = (moved.vx * nx + moved.vy * ny).clamp(max=0.0)
-    if cfg.approach_weight:
-        # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle
-        # (before the contact stops it) above the speed it could still brake from in its gap.
-        gap = (dist[:, :n] - cfg.body_radius).clamp(min=0.0)
-        brakeable = torch.sqrt(2.0 * cfg.approach_decel * gap)
-        approach_term = cfg.approach_weight * (-inward[:, :n] - brakeable).clamp(min=0.0)
     is_pursuer = torch.arange(n + 1, device=x.device) < n
     stop = contact & is_pursuer
     slide = contact & ~is_pursuer
@@ -499,7 +493,12 @@ def advance(
         own_distance = torch.where(chaser, distances, to_lead)
     r_self = -(cfg.self_weight * rho * own_distance + obstacle_term)
     if cfg.approach_weight:
-        r_self = r_self - approach_term
+        # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle
+        # (``inward``: before the contact stopped it) above the speed it could still brake from
+        # in its gap.
+        gap = (dist[:, :n] - cfg.body_radius).clamp(min=0.0)
+        brakeable = torch.sqrt(2.0 * cfg.approach_decel * gap)
+        r_self = r_self - cfg.approach_weight * (-inward[:, :n] - brakeable).clamp(min=0.0)
     reward = r_co + r_self
     if cfg.encirclement_weight:
         # Not in the paper: how one-sided the alive pursuers are, seen from the evader -- the
