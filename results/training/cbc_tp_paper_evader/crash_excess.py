@@ -20,7 +20,6 @@ from pes.evaluate import evaluate
 from pes.sim import scenario
 from pes.sim.config import EnvConfig
 
-DECEL = 2.5  # m/s^2, approach_decel's default
 
 
 def measure(path: str, cfg: EnvConfig, episodes: int = 200, seed: int = 10000) -> str:
@@ -34,7 +33,7 @@ def measure(path: str, cfg: EnvConfig, episodes: int = 200, seed: int = 10000) -
         gap = v.obstacle_dist[:, :n]
         vel = info["velocities"][:, :n]
         toward = (vel[..., 0] * v.obstacle_dx[:, :n] + vel[..., 1] * v.obstacle_dy[:, :n]) / gap
-        brake = torch.sqrt(2 * DECEL * (gap - cfg.body_radius).clamp(min=0))
+        brake = torch.sqrt(2 * cfg.approach_decel * (gap - cfg.body_radius).clamp(min=0))
         rec["excess"].append((toward - brake).clamp(min=0))
         rec["crashed"].append(info["crashed"].clone())
         rec["alive"].append(info["alive"].clone())
