@@ -21,7 +21,6 @@ from pes.sim import scenario
 from pes.sim.config import EnvConfig
 
 
-
 def measure(path: str, cfg: EnvConfig, episodes: int = 200, seed: int = 10000) -> str:
     """One line of figures for the policy at ``path``."""
     n = cfg.num_pursuers
