@@ -229,6 +229,40 @@ def test_init_from_a_checkpoint_copies_every_network(tmp_path):
         train(other, tmp_path / "other", progress=False)
 
 
+def test_init_from_a_policy_file_gives_the_actor_and_the_critic_warms_up_first(tmp_path):
+    """A policy file gives the actor, its target copy and TP Net; the critic starts fresh and,
+    for ``critic_warmup`` updates, learns alone: the actor stays the policy file's."""
+    _tiny(tmp_path / "src", episodes=8, eval_episodes=0)
+    policy_file = tmp_path / "src" / "policy.pt"
+    source = torch.load(policy_file, weights_only=True)["policy"]
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, init_from=str(policy_file)))
+    learner = CBCTP(cfg, cfg.env_config(), torch.device("cpu"))
+    fresh_critic = {k: v.clone() for k, v in learner.critic.state_dict().items()}
+    record = init_networks(learner, cfg)
+    assert record["loaded"] == ["actor", "actor_target", "tp"]
+    for name in record["loaded"]:
+        for key, value in learner.modules()[name].state_dict().items():
+            assert torch.equal(value, source[name.removesuffix("_target")][key]), (name, key)
+    for key, value in learner.critic.state_dict().items():
+        assert torch.equal(value, fresh_critic[key]), key
+
+    summary = _tiny(
+        tmp_path / "dst",
+        episodes=8,
+        eval_episodes=0,
+        init_from=str(policy_file),
+        critic_warmup=10**6,
+    )
+    assert summary["updates"] > 0
+    trained = torch.load(tmp_path / "dst" / "checkpoint.pt", weights_only=True)["modules"]
+    for key, value in trained["actor"].items():
+        assert torch.equal(value, source["actor"][key]), key
+    moved = [not torch.equal(v, fresh_critic[k]) for k, v in trained["critic"].items()]
+    assert any(moved)
+    with pytest.raises(ConfigError, match="critic_warmup is for"):
+        build_train_config("ppo", "tiny", dict(critic_warmup=10))
+
+
 def test_demonstrations_fill_the_buffer_and_are_cloned():
     """PID(PF) plays the first demo_transitions (marked in the buffer); the BC term then pulls
     the actor towards PID(PF)'s actions."""

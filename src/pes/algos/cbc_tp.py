@@ -384,10 +384,12 @@ class CBCTP:
         self, actor_loss: Tensor, critic_loss: Tensor, q: Tensor, alive: Tensor, stats: dict
     ) -> dict[str, float]:
         """The end of every actor-critic update (CBC-TP and its MADDPG / DDPG / BiCNet
-        relatives): the actor's step, the soft target updates, the losses and the mean Q of the
-        alive pursuers (q, alive: (B, N)) added to ``stats``, which is returned."""
+        relatives): the actor's step (none in the first ``critic_warmup`` updates), the soft
+        target updates, the losses and the mean Q of the alive pursuers (q, alive: (B, N))
+        added to ``stats``, which is returned."""
         cfg = self.cfg
-        optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
+        if self.updates > cfg.critic_warmup:
+            optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
         soft_update(self.actor_target, self.actor, cfg.tau)
         soft_update(self.critic_target, self.critic, cfg.tau)
         stats.update(

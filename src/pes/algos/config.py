@@ -159,7 +159,13 @@ class TrainConfig:
     """Evader-speed curriculum: training success rate (0-1) of a log row that raises the cap."""
     init_from: str = ""
     """Start every network (and target network) from this run's ``checkpoint.pt`` (same
-    algorithm and architecture); optimisers, replay buffer, noise and counters start fresh."""
+    algorithm and architecture); optimisers, replay buffer, noise and counters start fresh.
+    A policy file or a shipped model's name (``cbc-tp``) gives only the acting networks (and
+    their target copies): the critic starts fresh, so pair it with ``critic_warmup``."""
+    critic_warmup: int = 0
+    """Updates, counted from the run's start, that train the critic (and TP Net) but not the
+    actor (OU-noise pursuer learners): a fresh critic first learns the values of a trained
+    actor (``init_from`` a policy file) before its gradient steers that actor."""
 
     # --- demonstrations (CBC-TP, CBC Net, BiCNet) ------------------------------------------------
     demo_policy: str = ""
@@ -242,6 +248,7 @@ class TrainConfig:
             "lr_alpha",
             "attend_reg",
             "bc_weight",
+            "critic_warmup",
         ):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
@@ -288,11 +295,13 @@ class TrainConfig:
             raise ConfigError(
                 f"demo_transitions must be in [0, buffer_size], got {self.demo_transitions}"
             )
-        if self.greedy_envs and self.algo not in ("cbc-tp", "cbc", "maddpg", "ddpg", "bicnet"):
-            raise ConfigError(
-                f"greedy_envs is for the OU-noise pursuer learners (cbc-tp, cbc, maddpg, ddpg, "
-                f"bicnet), not {self.algo}"
-            )
+        ou_learners = ("cbc-tp", "cbc", "maddpg", "ddpg", "bicnet")
+        for name in ("greedy_envs", "critic_warmup"):
+            if getattr(self, name) and self.algo not in ou_learners:
+                raise ConfigError(
+                    f"{name} is for the OU-noise pursuer learners ({', '.join(ou_learners)}), "
+                    f"not {self.algo}"
+                )
         if self.opponent not in ("pid-pf", "random"):
             raise ConfigError(f"opponent must be pid-pf or random, got '{self.opponent}'")
         self.env_config()  # checks the scenario keys

@@ -15,8 +15,8 @@ A run lives in one folder::
                          (pursuers: highest success rate, then fewest steps; the evader:
                          the lowest pursuer success rate, then the most steps)
     OUT/summary.json     counters and the evaluation of policy.pt and best_policy.pt
-    OUT/init_from.json   with ``init_from``: the checkpoint the networks started from and its
-                         counters
+    OUT/init_from.json   with ``init_from``: the checkpoint or policy file the networks started
+                         from, which networks it gave and its counters
 
 ``train(cfg, out, resume=True)`` continues from ``checkpoint.pt``: networks, optimisers, replay
 buffer, noise, RNG states and counters come back; environments start fresh episodes (the
@@ -40,9 +40,11 @@ from pes.algos import ALGOS, PURSUER_ALGOS
 from pes.algos.config import TrainConfig
 from pes.algos.io import (
     CHECKPOINT_FORMAT,
+    POLICY_FORMAT,
     VERSION,
     load_file,
     load_modules,
+    resolve_policy_path,
     save_atomic,
     save_policy_file,
 )
@@ -393,19 +395,28 @@ def train(
 
 
 def init_networks(learner, cfg: TrainConfig) -> dict[str, Any]:
-    """Load every network of ``learner`` (target networks included) from the checkpoint
-    ``cfg.init_from`` (a run folder or its ``checkpoint.pt``); returns the checkpoint's path
-    and counters (episodes, env steps, updates, wall time)."""
+    """Load the networks of ``learner`` from ``cfg.init_from``: a run folder or its
+    ``checkpoint.pt`` (every network, target networks included), or a policy file or shipped
+    model name (``cbc-tp``: the acting networks and their target copies; the critic starts
+    fresh, see ``critic_warmup``). Returns the source's path, what was loaded and its counters
+    (episodes, env steps, updates, wall time)."""
     path = Path(cfg.init_from)
-    if path.is_dir():
-        path = path / "checkpoint.pt"
-    ckpt = load_file(path, CHECKPOINT_FORMAT)
-    if ckpt.get("algo") != cfg.algo:
-        raise CheckpointError(
-            f"init_from: '{path}' holds a {ckpt.get('algo')} run, this run trains {cfg.algo}"
-        )
-    load_modules(learner.modules(), ckpt["modules"], str(path))
-    return {"path": str(path.resolve()), "progress": ckpt["progress"]}
+    path = path / "checkpoint.pt" if path.is_dir() else resolve_policy_path(cfg.init_from)
+    source = load_file(path, (CHECKPOINT_FORMAT, POLICY_FORMAT))
+    algo = source.get("algo")
+    if algo != cfg.algo:
+        raise CheckpointError(f"init_from: '{path}' holds a {algo} run, this run trains {cfg.algo}")
+    if source["format"] == CHECKPOINT_FORMAT:
+        load_modules(learner.modules(), source["modules"], str(path))
+        return {"path": str(path.resolve()), "loaded": "all", "progress": source["progress"]}
+    modules = learner.modules()
+    acting = learner.policy_modules()
+    load_modules(acting, source["policy"], str(path))
+    for name, module in acting.items():  # target copies start equal to their networks
+        if f"{name}_target" in modules:
+            modules[f"{name}_target"].load_state_dict(module.state_dict())
+    loaded = sorted(n for n in modules if n in acting or n.removesuffix("_target") in acting)
+    return {"path": str(path.resolve()), "loaded": loaded, "progress": source["meta"]}
 
 
 def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: bool) -> dict:
