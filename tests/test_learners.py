@@ -3,6 +3,7 @@ buffer, the networks across swarm sizes, checkpoints, resumption after SIGKILL, 
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -261,6 +262,40 @@ def test_init_from_a_policy_file_gives_the_actor_and_the_critic_warms_up_first(t
     assert any(moved)
     with pytest.raises(ConfigError, match="critic_warmup is for"):
         build_train_config("ppo", "tiny", dict(critic_warmup=10))
+
+
+def test_anchor_weight_keeps_the_actor_near_the_one_it_started_from(tmp_path):
+    """With ``anchor_weight`` the actor's loss charges its distance from the starting actor: a
+    heavy anchor keeps the actions near the start where the same run without it moves away."""
+    _tiny(tmp_path / "src", episodes=8, eval_episodes=0)
+    policy_file = str(tmp_path / "src" / "policy.pt")
+    run = dict(episodes=16, eval_episodes=0, init_from=policy_file, lr_actor=3e-3)
+    _tiny(tmp_path / "free", **run)
+    _tiny(tmp_path / "anchored", **run, anchor_weight=100.0)
+    checkpoint = torch.load(tmp_path / "anchored" / "checkpoint.pt", weights_only=True)
+    source = torch.load(policy_file, weights_only=True)["policy"]["actor"]
+    for key, value in checkpoint["modules"]["anchor"].items():  # saved, for --resume
+        assert torch.equal(value, source[key]), key
+    log = (tmp_path / "anchored" / "progress.csv").read_text().splitlines()
+    rows = list(csv.DictReader(log))
+    assert all(float(r["anchor_distance"]) < 0.01 for r in rows if r["anchor_distance"])
+
+    def distance(run_dir) -> float:
+        cfg = build_train_config("cbc-tp", "tiny", dict(FAST))
+        env_cfg = cfg.env_config()
+        env = pes.make_env(env_cfg, num_envs=16, seed=5)
+        obs, info = env.reset()
+        start, _ = load_pursuer_policy(policy_file, env_cfg)
+        trained, _ = load_pursuer_policy(run_dir, env_cfg)
+        with torch.no_grad():
+            return float(((trained.act(obs, info) - start.act(obs, info)) ** 2).sum(-1).mean())
+
+    assert distance(tmp_path / "anchored") < 0.25 * distance(tmp_path / "free")
+    for bad, match in ((dict(anchor_weight=1.0), "set init_from"),):
+        with pytest.raises(ConfigError, match=match):
+            build_train_config("cbc-tp", "tiny", bad)
+    with pytest.raises(ConfigError, match="anchor_weight is for"):
+        build_train_config("maddpg", "tiny", dict(anchor_weight=1.0, init_from=policy_file))
 
 
 def test_demonstrations_fill_the_buffer_and_are_cloned():

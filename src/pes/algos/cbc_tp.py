@@ -185,6 +185,8 @@ class CBCTP:
         )
         self.actor_target = target_copy(self.actor)
         self.critic_target = target_copy(self.critic)
+        # ``anchor_weight``: a frozen copy of the actor the run started from (``init_from``)
+        self.anchor = target_copy(self.actor) if cfg.anchor_weight > 0 else None
         self.policy = CBCTPPolicy(self.actor, self.tp)
         self.target_policy = CBCTPPolicy(self.actor_target, self.tp)
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
@@ -347,6 +349,10 @@ class CBCTP:
             pre = self.actor.pre_activation(obs, mask, rel)  # (B, N, 2)
             new_action = torch.where(alive.unsqueeze(-1), torch.tanh(pre), action)
             acting = alive
+            if self.anchor is not None:
+                with torch.no_grad():
+                    anchored = torch.tanh(self.anchor.pre_activation(obs, mask, rel))
+                moved = ((torch.tanh(pre) - anchored) ** 2).sum(-1)  # (B, N)
         else:
             # the sampler's generator lives on the CPU (one RNG stream whatever the device)
             weights = alive.float().cpu() + 1e-6
@@ -354,6 +360,12 @@ class CBCTP:
             b = torch.arange(len(row), device=state.device)
             rel = None if rel is None else rel[b, pick]
             pre = self.actor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
+            if self.anchor is not None:
+                with torch.no_grad():
+                    anchored = torch.tanh(
+                        self.anchor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
+                    )
+                moved = ((torch.tanh(pre) - anchored) ** 2).sum(-1).unsqueeze(1)  # (B, 1)
             chosen = torch.nn.functional.one_hot(pick, n).bool() & alive
             new_action = torch.where(chosen.unsqueeze(-1), torch.tanh(pre).unsqueeze(1), action)
             pre = pre.unsqueeze(1) * chosen.unsqueeze(-1)
@@ -367,7 +379,14 @@ class CBCTP:
         # (a penalty on the action itself vanishes there).
         reg = masked_mean((pre**2).sum(-1), acting)
         q_term, bc_term = masked_mean(q_pi, acting), 0.0
-        if self.demo is not None and cfg.bc_weight > 0:
+        if self.anchor is not None:
+            # As TD3+BC's, with the starting actor's actions as the demonstrations: the Q term
+            # over the batch's mean |Q|, plus the squared distance to the anchor's action.
+            q_term = q_term / masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
+            anchor_term = masked_mean(moved.expand_as(acting), acting)
+            bc_term = cfg.anchor_weight * anchor_term
+            stats["anchor_distance"] = float(anchor_term.detach())
+        elif self.demo is not None and cfg.bc_weight > 0:
             # TD3+BC (Fujimoto & Gu 2021): the Q term divided by the batch's mean |Q|, so that
             # bc_weight weighs the same whatever the reward's scale, plus behaviour cloning on
             # the demonstrations (the other pursuers' actions are the stored ones, so they add
@@ -433,6 +452,8 @@ class CBCTP:
         }
         if self.tp is not None:
             out["tp"] = self.tp
+        if self.anchor is not None:
+            out["anchor"] = self.anchor
         return out
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:

@@ -162,6 +162,11 @@ class TrainConfig:
     algorithm and architecture); optimisers, replay buffer, noise and counters start fresh.
     A policy file or a shipped model's name (``cbc-tp``) gives only the acting networks (and
     their target copies): the critic starts fresh, so pair it with ``critic_warmup``."""
+    anchor_weight: float = 0.0
+    """CBC-TP, CBC Net, BiCNet with ``init_from``: keep the actor near the one the run started
+    from. The actor loss becomes TD3+BC's (Fujimoto & Gu 2021) with the starting actor as the
+    demonstrator: minus the Q term over the batch's mean |Q|, plus this weight times the squared
+    distance between the actor's action and the starting actor's (0 = off)."""
     critic_warmup: int = 0
     """Updates, counted from the run's start, that train the critic (and TP Net) but not the
     actor (OU-noise pursuer learners): a fresh critic first learns the values of a trained
@@ -249,6 +254,7 @@ class TrainConfig:
             "attend_reg",
             "bc_weight",
             "critic_warmup",
+            "anchor_weight",
         ):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
@@ -291,6 +297,11 @@ class TrainConfig:
                 raise ConfigError(f"demo_policy must be '' or pid-pf, got '{self.demo_policy}'")
             if self.algo not in ("cbc-tp", "cbc", "bicnet"):
                 raise ConfigError(f"demo_policy is for cbc-tp, cbc and bicnet, not {self.algo}")
+        if self.anchor_weight:
+            if self.algo not in ("cbc-tp", "cbc", "bicnet"):
+                raise ConfigError(f"anchor_weight is for cbc-tp, cbc and bicnet, not {self.algo}")
+            if not self.init_from:
+                raise ConfigError("anchor_weight keeps the actor near init_from's: set init_from")
         if not 0 <= self.demo_transitions <= self.buffer_size:
             raise ConfigError(
                 f"demo_transitions must be in [0, buffer_size], got {self.demo_transitions}"

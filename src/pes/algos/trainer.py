@@ -77,11 +77,13 @@ LOG_COLUMNS = (
     "updates_per_s",
     "evader_speed",
     "bc_share",
+    "anchor_distance",
 )
 """Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) reward
 divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
 evader's speed cap (m/s) during the row's episodes; ``bc_share`` the share of actor samples
-that are demonstrations (``demo_policy``)."""
+that are demonstrations (``demo_policy``); ``anchor_distance`` the mean squared distance
+between the actor's actions and the starting actor's (``anchor_weight``)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
 RESUMABLE_CHANGES = {
@@ -406,17 +408,22 @@ def init_networks(learner, cfg: TrainConfig) -> dict[str, Any]:
     algo = source.get("algo")
     if algo != cfg.algo:
         raise CheckpointError(f"init_from: '{path}' holds a {algo} run, this run trains {cfg.algo}")
+    # the anchor (``anchor_weight``) is this run's own: the actor it starts with
+    modules = {name: m for name, m in learner.modules().items() if name != "anchor"}
     if source["format"] == CHECKPOINT_FORMAT:
-        load_modules(learner.modules(), source["modules"], str(path))
-        return {"path": str(path.resolve()), "loaded": "all", "progress": source["progress"]}
-    modules = learner.modules()
-    acting = learner.policy_modules()
-    load_modules(acting, source["policy"], str(path))
-    for name, module in acting.items():  # target copies start equal to their networks
-        if f"{name}_target" in modules:
-            modules[f"{name}_target"].load_state_dict(module.state_dict())
-    loaded = sorted(n for n in modules if n in acting or n.removesuffix("_target") in acting)
-    return {"path": str(path.resolve()), "loaded": loaded, "progress": source["meta"]}
+        load_modules(modules, source["modules"], str(path))
+        loaded, progress = "all", source["progress"]
+    else:
+        acting = learner.policy_modules()
+        load_modules(acting, source["policy"], str(path))
+        for name, module in acting.items():  # target copies start equal to their networks
+            if f"{name}_target" in modules:
+                modules[f"{name}_target"].load_state_dict(module.state_dict())
+        loaded = sorted(n for n in modules if n.removesuffix("_target") in acting)
+        progress = source["meta"]
+    if getattr(learner, "anchor", None) is not None:
+        learner.anchor.load_state_dict(learner.actor.state_dict())
+    return {"path": str(path.resolve()), "loaded": loaded, "progress": progress}
 
 
 def evaluate_run(policy_path: Path, cfg: TrainConfig, episodes: int, progress: bool) -> dict:
