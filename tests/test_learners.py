@@ -278,7 +278,8 @@ def test_anchor_weight_keeps_the_actor_near_the_one_it_started_from(tmp_path):
         assert torch.equal(value, source[key]), key
     log = (tmp_path / "anchored" / "progress.csv").read_text().splitlines()
     rows = list(csv.DictReader(log))
-    assert all(float(r["anchor_distance"]) < 0.01 for r in rows if r["anchor_distance"])
+    logged = [float(r["anchor_distance"]) for r in rows if r["anchor_distance"]]
+    assert logged and max(logged) < 0.01
 
     def distance(run_dir) -> float:
         cfg = build_train_config("cbc-tp", "tiny", dict(FAST))
