@@ -328,6 +328,8 @@ class CBCTP:
         stats["critic_grad"] = optimise(
             self.opt_critic, critic_loss, self.critic.parameters(), cfg.grad_clip
         )
+        if self.critic_warming():
+            return self.finish_update(None, critic_loss, q, alive, stats)
 
         # Actor (eq. 4). "one": in each sample one alive pursuer acts with the current actor and
         # the others keep their stored actions (MADDPG's per-agent gradient); "all": every alive
@@ -399,22 +401,26 @@ class CBCTP:
         actor_loss = -q_term + cfg.action_reg * reg + bc_term
         return self.finish_update(actor_loss, critic_loss, q, alive, stats)
 
+    def critic_warming(self) -> bool:
+        """Whether this update is one of the first ``critic_warmup``: the critic learns alone
+        (call after counting the update in ``self.updates``)."""
+        return self.updates <= self.cfg.critic_warmup
+
     def finish_update(
-        self, actor_loss: Tensor, critic_loss: Tensor, q: Tensor, alive: Tensor, stats: dict
+        self, actor_loss: Tensor | None, critic_loss: Tensor, q: Tensor, alive: Tensor, stats: dict
     ) -> dict[str, float]:
         """The end of every actor-critic update (CBC-TP and its MADDPG / DDPG / BiCNet
-        relatives): the actor's step (none in the first ``critic_warmup`` updates), the soft
-        target updates, the losses and the mean Q of the alive pursuers (q, alive: (B, N))
+        relatives): the actor's step (none with ``actor_loss=None``, the critic's warm-up), the
+        soft target updates, the losses and the mean Q of the alive pursuers (q, alive: (B, N))
         added to ``stats``, which is returned."""
         cfg = self.cfg
-        if self.updates > cfg.critic_warmup:
+        if actor_loss is not None:
             optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
-        soft_update(self.actor_target, self.actor, cfg.tau)
+            soft_update(self.actor_target, self.actor, cfg.tau)
+            stats["actor_loss"] = float(actor_loss.detach())
         soft_update(self.critic_target, self.critic, cfg.tau)
         stats.update(
-            critic_loss=float(critic_loss.detach()),
-            actor_loss=float(actor_loss.detach()),
-            q_mean=float(masked_mean(q.detach(), alive)),
+            critic_loss=float(critic_loss.detach()), q_mean=float(masked_mean(q.detach(), alive))
         )
         return stats
 

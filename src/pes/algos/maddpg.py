@@ -197,6 +197,8 @@ class MADDPG(CBCTP):
                 self.opt_critic, critic_loss, self.critic.parameters(), cfg.grad_clip
             )
         }
+        if self.critic_warming():
+            return self.finish_update(None, critic_loss, q, alive, stats)
 
         # Actor i ascends Q_i with only its own action replaced by its actor's.
         obs, mask = pursuer_obs(state, alive)
