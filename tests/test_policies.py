@@ -85,3 +85,15 @@ def test_calibration_cases(monkeypatch):
     cases = calibration.cases()
     rows = calibration.run(episodes=2, seed=0)
     assert list(rows) == list(cases) and all(r["episodes"] == 2 for r in rows.values())
+
+
+def test_failures_split_into_a_lost_swarm_and_the_step_limit():
+    cfg = pes.EnvConfig(max_steps=60, crash_mode="disable").validate()
+    result = evaluate(RandomPolicy(cfg, seed=0), cfg, episodes=24, num_envs=24, seed=0)
+    ep = result.per_episode
+    assert set(ep["outcome"]) == {"lost", "timeout"}  # random pursuers never capture here
+    for outcome, success, steps in zip(ep["outcome"], ep["success"], ep["steps"]):
+        assert (outcome == "capture") == success
+        assert (outcome == "timeout") == (steps == 60)
+    rates = result.success_rate + result.lost_rate + result.timeout_rate
+    assert abs(rates - 1.0) < 1e-9 and 0 < result.lost_rate < 1

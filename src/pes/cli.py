@@ -214,7 +214,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
             f"{args.policy}: success {100 * result.success_rate:.1f} % "
             f"(± {100 * result.success_rate_ci95:.1f}), mean steps {result.mean_steps:.1f}, "
             f"average reward {result.mean_reward:.3f}, crashes/episode "
-            f"{result.mean_crashes:.2f} over {result.episodes} episodes"
+            f"{result.mean_crashes:.2f} over {result.episodes} episodes; failed "
+            f"{100 * result.lost_rate:.1f} % by losing the swarm, "
+            f"{100 * result.timeout_rate:.1f} % at the step limit"
         )
     return 0
 

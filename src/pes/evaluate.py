@@ -8,7 +8,9 @@ the machine.
 Metrics (SPEC §4): ``success_rate`` (captures / episodes), ``mean_steps`` (mean episode length
 over all episodes, failures at the limit included), ``mean_reward`` ("average reward": each
 episode's total reward divided by its steps, averaged over episodes; the total reward of a step
-is the mean over the pursuers alive at its start).
+is the mean over the pursuers alive at its start). A failure is either ``lost`` (fewer
+pursuers left alive than the capture needs: the episode ends early) or ``timeout`` (the evader
+still free at the step limit); ``lost_rate`` and ``timeout_rate`` split the failures so.
 """
 
 from __future__ import annotations
@@ -30,7 +32,9 @@ from pes.sim.env import make_env
 
 @dataclass
 class EvalResult:
-    """What :func:`evaluate` measured. Per-episode arrays are in episode order."""
+    """What :func:`evaluate` measured. ``per_episode`` holds the lists ``success``,
+    ``steps``, ``reward``, ``crashes`` and ``outcome`` (``capture``, ``lost``, ``timeout``)
+    in episode order."""
 
     episodes: int
     success_rate: float
@@ -40,6 +44,10 @@ class EvalResult:
     """Mean length of the successful episodes (NaN if none)."""
     mean_crashes: float
     """Mean pursuer crashes per episode."""
+    lost_rate: float
+    """Share of the episodes failed by losing the swarm (too few pursuers left to capture)."""
+    timeout_rate: float
+    """Share of the episodes failed by reaching the step limit."""
     success_rate_ci95: float
     """Half-width of the 95 % normal-approximation interval of the success rate."""
     seed: int
@@ -49,6 +57,14 @@ class EvalResult:
         """The scalar metrics as a JSON-friendly dict."""
         out = {k: v for k, v in asdict(self).items() if k != "per_episode"}
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
+
+
+def _outcome(info: dict, terminated: torch.Tensor, i: int) -> str:
+    """How the finished episode of environment ``i`` ended: ``capture``, ``lost`` (too few
+    pursuers alive) or ``timeout`` (the step limit)."""
+    if bool(info["success"][i]):
+        return "capture"
+    return "lost" if bool(terminated[i]) else "timeout"
 
 
 def evaluate(
@@ -81,7 +97,7 @@ def evaluate(
     quota = torch.full((num_envs,), episodes // num_envs, dtype=torch.long)
     quota[: episodes % num_envs] += 1
     finished = torch.zeros(num_envs, dtype=torch.long)
-    slot = {"success": [], "steps": [], "reward": [], "crashes": []}
+    slot = {"success": [], "steps": [], "reward": [], "crashes": [], "outcome": []}
     results = {k: [[] for _ in range(num_envs)] for k in slot}
 
     obs, info = env.reset(seed=seed)
@@ -106,6 +122,7 @@ def evaluate(
                         results["steps"][i].append(steps)
                         results["reward"][i].append(float(reward_sum[i]) / steps)
                         results["crashes"][i].append(int(info["crashes"][i]))
+                        results["outcome"][i].append(_outcome(info, terminated, i))
                         finished[i] += 1
                         bar.update(1)
                 reward_sum = torch.where(done, 0.0, reward_sum)
@@ -122,6 +139,7 @@ def evaluate(
     success = np.array(per_episode["success"], dtype=float)
     steps = np.array(per_episode["steps"], dtype=float)
     rate = float(success.mean())
+    outcomes = per_episode["outcome"]
     return EvalResult(
         episodes=len(success),
         success_rate=rate,
@@ -129,6 +147,8 @@ def evaluate(
         mean_reward=float(np.mean(per_episode["reward"])),
         success_steps=float(steps[success > 0].mean()) if success.any() else float("nan"),
         mean_crashes=float(np.mean(per_episode["crashes"])),
+        lost_rate=outcomes.count("lost") / len(outcomes),
+        timeout_rate=outcomes.count("timeout") / len(outcomes),
         success_rate_ci95=float(1.96 * math.sqrt(rate * (1 - rate) / len(success))),
         seed=seed,
         per_episode=per_episode,
