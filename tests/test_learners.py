@@ -209,6 +209,48 @@ def test_evader_speed_curriculum_rises_with_success(tmp_path):
         env.set_evader_max_speed(12.5)
 
 
+def test_crashes_disable_once_training_success_reaches_the_threshold(tmp_path, monkeypatch):
+    """Every episode is a capture (as above), so the first log row the learner played
+    switches the crash rule: the environments are rebuilt with crashes that disable, the
+    switch is logged and kept in the checkpoint, and a resumed run plays by the new rule."""
+    import pes.algos.trainer as trainer  # noqa: PLC0415
+
+    modes: list[str] = []
+    make_env = trainer.make_env
+
+    def recording_make_env(env_cfg, **kwargs):
+        modes.append(env_cfg.crash_mode)
+        return make_env(env_cfg, **kwargs)
+
+    monkeypatch.setattr(trainer, "make_env", recording_make_env)
+    easy = dict(max_steps=20, capture_count=1, capture_radius=500.0, capture_hold=1)
+    run = dict(log_every=8, eval_episodes=0, disable_crashes_at=0.5, env=easy)
+
+    def switched(out) -> list[int]:
+        with open(out / "progress.csv", newline="") as f:
+            return [int(r["crashes_disable"]) for r in csv.DictReader(f)]
+
+    _tiny(tmp_path / "run", episodes=24, **run)
+    assert modes == ["continue", "disable"]
+    assert switched(tmp_path / "run") == [0, 1, 1]
+    checkpoint = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)
+    assert checkpoint["progress"]["crashes_disable"] is True
+    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, episodes=40, **run))
+    train(cfg, tmp_path / "run", resume=True, progress=False)
+    assert modes == ["continue", "disable", "disable"]
+    # Rows that PID(PF) demonstrated measure the demonstrator: they do not switch the rule.
+    modes.clear()
+    _tiny(tmp_path / "demo", episodes=32, demo_policy="pid-pf", demo_transitions=16, **run)
+    assert switched(tmp_path / "demo") == [0, 0, 0, 1]
+    assert modes == ["continue", "disable"]
+    started_disabled = dict(disable_crashes_at=0.5, env=dict(crash_mode="disable"))
+    for bad in (dict(disable_crashes_at=1.5), started_disabled):
+        with pytest.raises(ConfigError, match="disable_crashes_at"):
+            build_train_config("cbc-tp", "tiny", bad)
+    with pytest.raises(ConfigError, match="disable_crashes_at"):
+        build_train_config("ppo", "tiny", dict(disable_crashes_at=0.5))
+
+
 def test_init_from_a_checkpoint_copies_every_network(tmp_path):
     _tiny(tmp_path / "src", episodes=8, eval_episodes=0)
     source = torch.load(tmp_path / "src" / "checkpoint.pt", weights_only=True)["modules"]

@@ -157,6 +157,12 @@ class TrainConfig:
     """Evader-speed curriculum: m/s added at each raise."""
     curriculum_success: float = 0.3
     """Evader-speed curriculum: training success rate (0-1) of a log row that raises the cap."""
+    disable_crashes_at: float = 0.0
+    """Crash-rule curriculum of the off-policy pursuer learners (0 = off): training starts
+    with ``env.crash_mode=continue`` and, once a log row's training success rate reaches this
+    (0-1), crashes disable the pursuer for the rest of the run, as in every evaluation (pair it
+    with ``charge_exits``). Crashes that disable from the first episode teach a swarm to stay
+    alive rather than to chase."""
     init_from: str = ""
     """Start every network (and target network) from this run's ``checkpoint.pt`` (same
     algorithm and architecture); optimisers, replay buffer, noise and counters start fresh.
@@ -291,6 +297,17 @@ class TrainConfig:
         if not 0.0 < self.curriculum_success <= 1.0:
             raise ConfigError(
                 f"curriculum_success must be in (0, 1], got {self.curriculum_success}"
+            )
+        if not 0.0 <= self.disable_crashes_at <= 1.0:
+            raise ConfigError(
+                f"disable_crashes_at must be 0 (off) or in (0, 1], got {self.disable_crashes_at}"
+            )
+        if self.disable_crashes_at and self.env_config().crash_mode != "continue":
+            raise ConfigError("disable_crashes_at needs env.crash_mode=continue to start from")
+        if self.disable_crashes_at and self.algo in ("ppo", "evader-ddpg"):
+            # PPO's rollout would run across the restart; the evader has no pursuers to lose
+            raise ConfigError(
+                f"disable_crashes_at is for the off-policy pursuer learners, not {self.algo}"
             )
         if self.demo_policy:
             if self.demo_policy != "pid-pf":

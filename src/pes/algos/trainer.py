@@ -76,6 +76,7 @@ LOG_COLUMNS = (
     "env_steps_per_s",
     "updates_per_s",
     "evader_speed",
+    "crashes_disable",
     "bc_share",
     "anchor_distance",
 )
@@ -98,6 +99,7 @@ RESUMABLE_CHANGES = {
     "init_from",
     "curriculum_step",
     "curriculum_success",
+    "disable_crashes_at",
 }
 
 
@@ -110,6 +112,7 @@ class Progress:
     update_credit: float = 0.0
     best_score: float = -math.inf
     evader_speed: float = 0.0  # the curriculum's current cap (m/s); 0 = no curriculum
+    crashes_disable: bool = False  # the crash-rule curriculum has switched (disable_crashes_at)
 
 
 class RunLogger:
@@ -253,19 +256,25 @@ def train(
         policy = {k: m.state_dict() for k, m in learner.policy_modules().items()}
         save_policy_file(path, cfg.algo, to_dict(cfg), to_dict(env_cfg), policy, info)
 
-    # Each (re)start plays fresh episodes: seed by the episodes already played.
-    env = make_env(
-        env_cfg,
-        num_envs=cfg.num_envs,
-        device=device,
-        seed=cfg.seed * 1_000_003 + prog.episodes,
-        compile=cfg.compile_env,
-    )
-    top_speed = env.evader_max_speed
-    if prog.evader_speed > 0:
-        env.set_evader_max_speed(prog.evader_speed)
-    obs, info = env.reset()
-    learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=device))
+    def start_env():
+        """The training environments, every episode fresh: at a (re)start, seeded by the
+        episodes already played, and when the crash rule switches."""
+        crash_mode = "disable" if prog.crashes_disable else env_cfg.crash_mode
+        env = make_env(
+            env_cfg.replace(crash_mode=crash_mode),
+            num_envs=cfg.num_envs,
+            device=device,
+            seed=cfg.seed * 1_000_003 + prog.episodes,
+            compile=cfg.compile_env,
+        )
+        if prog.evader_speed > 0:
+            env.set_evader_max_speed(prog.evader_speed)
+        obs, info = env.reset()
+        learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=device))
+        return env, obs, info
+
+    env, obs, info = start_env()
+    top_speed = env_cfg.evader_max_speed
     logger = RunLogger(out, cfg.tensorboard, resume)
     window: dict[str, list] = {"success": [], "steps": [], "reward": [], "crashes": []}
     # Whether a demonstration policy (CBC-TP's demo_policy) played during this log row.
@@ -341,6 +350,7 @@ def train(
                     "env_steps_per_s": (prog.env_steps - row_start[1]) / dt,
                     "updates_per_s": (prog.updates - row_start[2]) / dt,
                     "evader_speed": env.evader_max_speed,
+                    "crashes_disable": int(prog.crashes_disable),
                 }
                 row.update({k: v / stats_count[k] for k, v in stats_sum.items()})
                 logger.write(row)
@@ -364,6 +374,17 @@ def train(
                     # the new speed (success rates at different speeds do not compare).
                     prog.evader_speed = min(top_speed, prog.evader_speed + cfg.curriculum_step)
                     env.set_evader_max_speed(prog.evader_speed)
+                    prog.best_score = -math.inf
+                if (
+                    0 < cfg.disable_crashes_at <= row["success_rate"]
+                    and not prog.crashes_disable
+                    and not demo_in_row
+                ):
+                    # Crashes disable from now on: the episodes in flight are abandoned (as at
+                    # a resume) and the best policy is sought afresh under the new rule.
+                    prog.crashes_disable = True
+                    env, obs, info = start_env()
+                    reward_sum.zero_()
                     prog.best_score = -math.inf
                 bar.set_postfix(
                     success=f"{row['success_rate']:.2f}",
