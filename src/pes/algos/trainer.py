@@ -82,7 +82,8 @@ LOG_COLUMNS = (
 )
 """Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) reward
 divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
-evader's speed cap (m/s) during the row's episodes; ``bc_share`` the share of actor samples
+evader's speed cap (m/s) during the row's episodes; ``crashes_disable`` 1 when they were
+played with crashes that disable (``disable_crashes_at``); ``bc_share`` the share of actor samples
 that are demonstrations (``demo_policy``); ``anchor_distance`` the mean squared distance
 between the actor's actions and the starting actor's (``anchor_weight``)."""
 
