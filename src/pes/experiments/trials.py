@@ -83,8 +83,8 @@ BUDGETS = {
     ),
 }
 """``pes reproduce --budget``: ``paper`` trains each method with its paper preset (the paper's
-episode budgets); ``quick`` with a fifth of the episodes of its quick preset (CBC-TP Net: 500),
-so that the 3-seed sweep of all methods runs in about two hours on a 2-core CPU. Neither has a
+episode budgets); ``quick`` with a fifth of the episodes of its quick preset (CBC-TP Net: 1200),
+so that the 3-seed sweep of all methods runs in one to two hours on a 2-core CPU. Neither has a
 wall-clock limit, so a trial does not depend on the machine's speed or load; both evaluate on
 1000 episodes. ``tiny`` runs the whole pipeline in a minute (tests)."""
 
