@@ -411,7 +411,7 @@ QUICK = dict(
 """CBC-TP's quick preset (a laptop CPU, 60 minutes): the learner of :data:`QUICK_LEARNER` with
 PID(PF)'s demonstrations, half the environments without noise, the training reward and
 disturbance of the shipped swarm's last stage, and crashes that disable once a log row
-captures 30 % (docs/algorithms/cbc_tp.md, "The quick preset")."""
+captures 30 % (docs/algorithms/cbc_tp.md, "The quick preset rebuilt")."""
 
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "cbc-tp": {
