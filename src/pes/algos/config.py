@@ -363,7 +363,9 @@ PAPER = dict(
 """The paper's settings (§V-A), shared by every algorithm's ``paper`` preset."""
 
 # The distance terms of eqs. (8)-(9) ten times heavier in training (evaluations use the paper's
-# weights): see docs/algorithms/cbc_tp.md, "Training reward". The baselines train with it too.
+# weights): see docs/algorithms/cbc_tp.md, "Training reward". The baselines' quick presets train
+# with it and the same opponent, so that their Table IV rows and CBC-TP's old quick preset
+# (QUICK_LEARNER) differ by the learner alone.
 QUICK_ENV = dict(evader_policy="ddpg", self_weight=5.0, cooperation_weight=1.0)
 QUICK_LEARNER = dict(
     episodes=2500,
@@ -472,9 +474,6 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         ),
     },
 }
-# The baselines train with the shaped reward and opponent of CBC-TP's quick learner
-# (QUICK_ENV), so that the quick Table IV rows differ by the learner (evaluations use the paper's
-# reward).
 TINY = dict(
     episodes=40,
     num_envs=8,
