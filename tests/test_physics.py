@@ -11,7 +11,7 @@ import torch
 import pes
 from pes.errors import ConfigError
 from pes.sim.dynamics import Vehicles, attitude_gains, quadrotor_step
-from pes.sim.geometry import nearest_obstacle, ray_distance
+from pes.sim.geometry import build_roadmap, geodesic_distance, nearest_obstacle, ray_distance
 from pes.sim.scenario import softplus_obstacle_term
 from tests.conftest import set_vehicles
 
@@ -264,13 +264,13 @@ def test_rewards_follow_equations_8_and_9():
 
 
 def one_step_rewards(x, y, vx=None, **changes):
-    """Pursuers' rewards and distances, (N,) each, of one step on the empty map with point-mass
-    dynamics, from positions ``x``, ``y`` and x-velocities ``vx`` ((1, N + 1) each, the evader
-    last; at rest if None), every action zero; ``changes`` are EnvConfig keys."""
+    """Pursuers' rewards and distances, (N,) each, of one step on the empty map (or
+    ``changes["layout"]``) with point-mass dynamics, from positions ``x``, ``y`` and
+    x-velocities ``vx`` ((1, N + 1) each, the evader last; at rest if None), every action zero;
+    ``changes`` are EnvConfig keys."""
     n = x.shape[1] - 1
-    cfg = pes.EnvConfig(
-        num_pursuers=n, layout="empty", evader_policy="external", dynamics="point_mass", **changes
-    )
+    changes = {"layout": "empty", **changes}
+    cfg = pes.EnvConfig(num_pursuers=n, evader_policy="external", dynamics="point_mass", **changes)
     env = pes.make_env(cfg, num_envs=1, seed=0)
     env.reset()
     vx = torch.zeros_like(x) if vx is None else vx
@@ -333,3 +333,39 @@ def test_approach_term_charges_speed_towards_a_wall_beyond_braking_not_nearness(
     assert charged == pytest.approx(0.5 * (4.0 - math.sqrt(1.5)), abs=0.02)
     with pytest.raises(ConfigError, match="approach_weight"):
         pes.EnvConfig(approach_weight=-1.0).validate()
+
+
+def test_geodesic_distance_goes_round_the_buildings():
+    """The straight distance where the segment is clear; otherwise the shortest path through
+    the waypoints off the building corners, here over the top of one box."""
+    boxes, arena = torch.tensor([[5.0, 0.0, 15.0, 10.0]]), torch.tensor([30.0, 30.0])
+    roadmap = build_roadmap(boxes, arena, margin=1.0)
+    # The box's two bottom corners lie on the arena's wall: only the top ones are waypoints.
+    assert torch.equal(roadmap.nodes, torch.tensor([[4.0, 11.0], [16.0, 11.0]]))
+    p = torch.tensor([[[0.0, 5.0], [0.0, 20.0], [10.0, 20.0]]])
+    q = torch.tensor([[20.0, 5.0]])
+    over = math.hypot(4.0, 6.0) + 12.0 + math.hypot(4.0, 6.0)
+    by_16_11 = math.hypot(16.0, 9.0) + math.hypot(4.0, 6.0)  # (0, 20) sees (16, 11)
+    expected = torch.tensor([[over, by_16_11, math.hypot(10.0, 15.0)]])
+    assert torch.allclose(geodesic_distance(p, q, boxes, roadmap), expected, atol=1e-4)
+
+
+def test_geodesic_metric_charges_the_path_round_a_building():
+    """``distance_metric="geodesic"``: a pursuer with a building between it and the evader is
+    charged the path round it in eqs. (8)-(9); with a clear line nothing changes; capture and
+    ``info["distances"]`` stay straight. The evaluation protocol restores the straight one."""
+    # Default grid: the west block spans x 11.5-29.5, y 41-59; the centre block is removed.
+    # Pursuer 0 west of it, pursuers 1 and 2 in the streets south and west of the centre.
+    x, y = torch.tensor([[5.0, 50.0, 35.0, 50.0]]), torch.tensor([[50.0, 35.0, 50.0, 50.0]])
+    paper, d = one_step_rewards(x, y, layout="grid")
+    path, d_path = one_step_rewards(x, y, layout="grid", distance_metric="geodesic")
+    assert torch.allclose(d, d_path) and d[0] == pytest.approx(45.0, abs=1e-3)
+    # Round the block's south-west and south-east waypoints, 1 m off its corners.
+    extra = math.hypot(5.5, 10.0) + 20.0 + math.hypot(19.5, 10.0) - 45.0
+    rho = 1 / math.hypot(100, 100)
+    charged = torch.tensor([0.1 + 0.5, 0.1, 0.1]) * rho * extra
+    assert torch.allclose(paper - path, charged, atol=1e-5)
+    evaluated = pes.EnvConfig(distance_metric="geodesic").for_evaluation()
+    assert evaluated.distance_metric == "euclidean"
+    with pytest.raises(ConfigError, match="distance_metric"):
+        pes.EnvConfig(distance_metric="manhattan").validate()

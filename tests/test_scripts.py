@@ -91,3 +91,18 @@ def test_behaviour_times_the_phases_of_a_capture_in_order():
     assert 0 <= first_near <= three_within_2 and 0 <= three_within_5 <= three_within_2
     assert three_within_2 + 4 <= capture < 500
     assert 0.0 <= at_wall <= 1.0
+
+
+def test_crash_sites_records_every_crash_of_the_measured_episodes(tmp_path, capsys):
+    """An untrained swarm crashes often: the script keeps one record per crash of the episodes
+    the evaluation counts (not of those the environments play past their share)."""
+    _tiny_run(tmp_path / "run")
+    out = tmp_path / "crashes.json"
+    argv = [str(tmp_path / "run"), "--episodes", "12", "--num-envs", "5", "--out", str(out)]
+    assert _script("crash_sites").main(argv) == 0
+    summary = json.loads(out.read_text())
+    evaluation = summary["evaluation"]
+    assert summary["crashes"] == round(evaluation["mean_crashes"] * evaluation["episodes"]) > 0
+    assert 0.0 <= summary["share_evader_hidden"] <= 1.0
+    assert sum(map(sum, summary["map_10m_north_up"])) == summary["crashes"]
+    assert json.loads(capsys.readouterr().out) == summary

@@ -32,6 +32,7 @@ REWARD_KEYS = (
     "capture_reward",
     "encirclement_weight",
     "intercept_lead",
+    "distance_metric",
     "approach_weight",
     "approach_decel",
     "evader_capture_reward",
@@ -186,6 +187,13 @@ class EnvConfig:
     keeps its distance to the evader; every other one is charged its distance to the point the
     evader reaches in ``intercept_lead`` seconds at its current velocity (s), so that the rest
     of the swarm is paid for cutting the evader off rather than trailing it. A training aid."""
+    distance_metric: str = "euclidean"
+    """The pursuer-evader distance that eqs. (8)-(9) charge: ``euclidean`` (the paper's) or,
+    not in the paper, ``geodesic``, the length of the shortest path round the buildings (through
+    waypoints 0.7 m beyond the body radius off their corners; the straight distance where
+    nothing stands between). Under the straight distance a pursuer with a building between it
+    and the evader is paid for flying into the building; under the path it is paid for going
+    round. Capture and ``info["distances"]`` stay straight. A training aid."""
     approach_weight: float = 0.0
     """Not in the paper (0 = its reward): every alive pursuer is charged weight x the speed
     (m/s) at which it flies towards its nearest obstacle beyond the speed from which it could
@@ -300,6 +308,10 @@ class EnvConfig:
             raise ConfigError(
                 f"physics sub-step dt/physics_substeps = {substep:g} s is too long for "
                 f"attitude_bandwidth {self.attitude_bandwidth:g} rad/s (need product <= 0.5)"
+            )
+        if self.distance_metric not in ("euclidean", "geodesic"):
+            raise ConfigError(
+                f"distance_metric must be euclidean or geodesic, got '{self.distance_metric}'"
             )
         if self.evader_policy not in EVADER_POLICIES:
             raise ConfigError(

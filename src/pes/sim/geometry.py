@@ -8,6 +8,9 @@ step pushes it out).
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import torch
 from torch import Tensor
 
@@ -160,3 +163,83 @@ def ray_distance(
         t_hit = torch.where(hit, t_enter.clamp(min=0.0), max_distance)
         dist = torch.minimum(dist, t_hit.amin(dim=-1))
     return dist
+
+
+def segment_clear(a: Tensor, b: Tensor, boxes: Tensor) -> Tensor:
+    """Whether the straight segments from ``a`` to ``b`` (..., 2) miss every building (B, 4)
+    [xmin, ymin, xmax, ymax] (m); a segment that only grazes a box's surface is clear.
+    Returns (...) bool."""
+    if boxes.shape[0] == 0:
+        shape = torch.broadcast_shapes(a.shape, b.shape)[:-1]
+        return torch.ones(shape, dtype=torch.bool, device=a.device)
+    d = b - a
+    d = torch.where(d.abs() < 1e-9, torch.full_like(d, 1e-9), d)
+    a, d = a.unsqueeze(-2), d.unsqueeze(-2)  # (..., 1, 2) against (B, 2)
+    t0 = (boxes[:, :2] - a) / d
+    t1 = (boxes[:, 2:] - a) / d
+    t_enter = torch.minimum(t0, t1).amax(-1).clamp(min=0.0)  # (..., B)
+    t_exit = torch.maximum(t0, t1).amin(-1).clamp(max=1.0)
+    return ~(t_enter < t_exit).any(-1)
+
+
+class Roadmap(NamedTuple):
+    """The shortest paths round the buildings, for :func:`geodesic_distance`: waypoints just
+    off every building corner that lies inside the arena and outside every other building, and
+    the length of the shortest waypoint-to-waypoint path between each pair."""
+
+    nodes: Tensor  # (K, 2) m
+    between: Tensor  # (K, K) m, inf where no path joins them
+
+
+def build_roadmap(boxes: Tensor, arena: Tensor, margin: float) -> Roadmap:
+    """The :class:`Roadmap` of buildings ``boxes`` (B, 4) in an arena (2,) of walls, with the
+    waypoints ``margin`` (m) off each corner along both axes."""
+    if boxes.shape[0] == 0:
+        empty = boxes.new_zeros((0, 2))
+        return Roadmap(empty, boxes.new_zeros((0, 0)))
+    x0, y0, x1, y1 = boxes.unbind(-1)
+    corners = torch.stack(
+        [
+            torch.stack([x0 - margin, y0 - margin], -1),
+            torch.stack([x1 + margin, y0 - margin], -1),
+            torch.stack([x0 - margin, y1 + margin], -1),
+            torch.stack([x1 + margin, y1 + margin], -1),
+        ],
+        dim=1,
+    ).reshape(-1, 2)
+    inside_arena = ((corners > 0) & (corners < arena)).all(-1)
+    in_box = (
+        (corners[:, None, :] > boxes[None, :, :2]) & (corners[:, None, :] < boxes[None, :, 2:])
+    ).all(-1)
+    nodes = corners[inside_arena & ~in_box.any(-1)]
+    length = (nodes[:, None] - nodes[None]).norm(dim=-1).double()
+    between = torch.where(segment_clear(nodes[:, None], nodes[None], boxes), length, math.inf)
+    for k in range(len(nodes)):  # Floyd-Warshall
+        between = torch.minimum(between, between[:, k : k + 1] + between[k : k + 1, :])
+    return Roadmap(nodes, between.to(boxes.dtype))
+
+
+def geodesic_distance(p: Tensor, q: Tensor, boxes: Tensor, roadmap: Roadmap) -> Tensor:
+    """Length (m) of the shortest path from ``p`` (..., M, 2) to ``q`` (..., 2) that goes round
+    the buildings ``boxes`` (B, 4): the straight distance where the segment is clear, else the
+    shortest path through the roadmap's waypoints (the straight distance if none joins them).
+    Returns (..., M)."""
+    q = q.unsqueeze(-2)  # (..., 1, 2)
+    direct = (p - q).norm(dim=-1)
+    if roadmap.nodes.shape[0] == 0:
+        return direct
+    nodes = roadmap.nodes
+    p_leg = torch.where(
+        segment_clear(p.unsqueeze(-2), nodes, boxes),
+        (p.unsqueeze(-2) - nodes).norm(dim=-1),
+        math.inf,
+    )  # (..., M, K)
+    q_leg = torch.where(
+        segment_clear(q.unsqueeze(-2), nodes, boxes),
+        (q.unsqueeze(-2) - nodes).norm(dim=-1),
+        math.inf,
+    )  # (..., 1, K)
+    to_q = (roadmap.between + q_leg.unsqueeze(-2)).amin(-1)  # (..., 1, K): waypoint a to q
+    around = (p_leg + to_q).amin(-1)
+    path = torch.where(segment_clear(p, q, boxes), direct, around)
+    return torch.where(torch.isfinite(path), path, direct)

@@ -46,7 +46,13 @@ from pes.sim.dynamics import (
     quadrotor_step,
 )
 from pes.sim.evader import EvaderPolicy, FleeEvader, NetworkEvader, RandomEvader
-from pes.sim.geometry import nearest_obstacle, nearest_obstacle_xy
+from pes.sim.geometry import (
+    Roadmap,
+    build_roadmap,
+    geodesic_distance,
+    nearest_obstacle,
+    nearest_obstacle_xy,
+)
 from pes.sim.layout import Layout, make_layout
 
 OBS_FEATURES = 8
@@ -61,6 +67,7 @@ STREAM_DISTURBANCE = 4
 
 SPAWN_CELL = 0.5  # m, resolution of the grid of free start cells
 CONTACT_GAP = 1e-3  # m, how far outside the body radius a pushed-out vehicle is put
+ROADMAP_CLEARANCE = 0.7  # m beyond the body radius: the waypoints round building corners
 
 
 class Counters(NamedTuple):
@@ -116,6 +123,7 @@ class Scenario:
     other_index: Tensor  # (N, N) row k of pursuer i's observation shows pursuer other_index[i, k]
     vel_scale: float  # pursuer max speed, m/s: velocity normaliser of observations
     evader_policy: EvaderPolicy | None = field(default=None)
+    roadmap: Roadmap | None = field(default=None)  # distance_metric="geodesic" only
 
     @property
     def num_pursuers(self) -> int:
@@ -193,6 +201,8 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
         other_index=others,
         vel_scale=config.pursuer_max_speed,
     )
+    if config.distance_metric == "geodesic":
+        scenario.roadmap = build_roadmap(boxes, arena, config.body_radius + ROADMAP_CLEARANCE)
     if config.evader_policy == "flee":
         scenario.evader_policy = FleeEvader(
             boxes,
@@ -479,18 +489,23 @@ def advance(
     # Rewards, eqs. (8)-(9), for the pursuers alive at the start of the step.
     rho = 1.0 / cfg.arena_diagonal
     alive0_f = alive0.to(x.dtype)
-    r_co = -cfg.cooperation_weight * rho * (distances * alive0_f).sum(-1, keepdim=True)
+    paid = distances  # the distance the reward charges
+    if sc.roadmap is not None:  # Not in the paper: the path round the buildings
+        pursuers = torch.stack([x[:, :n], y[:, :n]], dim=-1)
+        evader = torch.stack([x[:, n], y[:, n]], dim=-1)
+        paid = geodesic_distance(pursuers, evader, sc.boxes, sc.roadmap)
+    r_co = -cfg.cooperation_weight * rho * (paid * alive0_f).sum(-1, keepdim=True)
     obstacle_term = softplus_obstacle_term(dist[:, :n], cfg.safe_distance, cfg.softplus_k)
     # The nearest alive pursuer's distance (E, 1): the evader's reward, and the chaser's role.
     nearest_gap = torch.where(alive0, distances, float("inf")).amin(-1, keepdim=True)
-    own_distance = distances
+    own_distance = paid
     if cfg.intercept_lead:
         # Not in the paper: all but the nearest alive pursuer aim at the evader's lead point.
         lead_x = dx - moved.vx[:, n:] * cfg.intercept_lead
         lead_y = dy - moved.vy[:, n:] * cfg.intercept_lead
         to_lead = torch.sqrt(lead_x * lead_x + lead_y * lead_y)
         chaser = alive0 & (distances == nearest_gap)
-        own_distance = torch.where(chaser, distances, to_lead)
+        own_distance = torch.where(chaser, paid, to_lead)
     r_self = -(cfg.self_weight * rho * own_distance + obstacle_term)
     if cfg.approach_weight:
         # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle
