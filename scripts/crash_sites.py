@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from pes.algos.io import default_evader_policy  # noqa: E402
 from pes.algos.policy import load_pursuer_policy  # noqa: E402
-from pes.evaluate import evaluate  # noqa: E402
+from pes.evaluate import episode_quota, evaluate  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
 from pes.sim.geometry import segment_clear  # noqa: E402
 
@@ -49,19 +49,17 @@ def main(argv: list[str] | None = None) -> int:
     policy, _ = load_pursuer_policy(args.policy, config)
     crashes: list[dict] = []
     before: dict[str, torch.Tensor] = {}
-    # Environments keep stepping past their share of the episodes while the others finish
-    # theirs (as in evaluate()): count each one's episodes and keep the crashes of its share.
-    num_envs = min(args.num_envs, args.episodes)
-    quota = torch.full((num_envs,), args.episodes // num_envs)
-    quota[: args.episodes % num_envs] += 1
+    # Count each environment's episodes and keep the crashes of the ones evaluate() counts.
+    num_envs = max(1, min(args.num_envs, args.episodes))
+    quota = episode_quota(args.episodes, num_envs)
     episode = torch.full((num_envs,), -1)
 
     def on_step(env, info) -> None:
         episode.add_((info["steps"] == 1).long())  # the first step of an episode
-        measured = episode < quota
-        if before and bool((info["crashed"] & measured[:, None]).any()):
+        counted = info["crashed"] & (episode < quota)[:, None]
+        if before and bool(counted.any()):
             boxes = env.scenario.boxes
-            for e, i in torch.nonzero(info["crashed"] & measured[:, None]).tolist():
+            for e, i in torch.nonzero(counted).tolist():
                 site, evader = info["positions"][e, i], info["positions"][e, -1]
                 crashes.append(
                     {

@@ -67,6 +67,15 @@ def _outcome(info: dict, terminated: torch.Tensor, i: int) -> str:
     return "lost" if bool(terminated[i]) else "timeout"
 
 
+def episode_quota(episodes: int, num_envs: int) -> torch.Tensor:
+    """(num_envs,) long: how many of ``episodes`` each environment of :func:`evaluate` plays
+    and counts (the first ``episodes % num_envs`` one more); it keeps stepping past its share
+    while the others finish theirs."""
+    quota = torch.full((num_envs,), episodes // num_envs, dtype=torch.long)
+    quota[: episodes % num_envs] += 1
+    return quota
+
+
 def evaluate(
     policy: Policy,
     config: EnvConfig,
@@ -94,8 +103,7 @@ def evaluate(
         raise ConfigError(f"episodes must be at least 1, got {episodes}")
     num_envs = max(1, min(num_envs, episodes))
     env = make_env(config, num_envs=num_envs, device=device, seed=seed, compile=compile)
-    quota = torch.full((num_envs,), episodes // num_envs, dtype=torch.long)
-    quota[: episodes % num_envs] += 1
+    quota = episode_quota(episodes, num_envs)
     finished = torch.zeros(num_envs, dtype=torch.long)
     slot = {"success": [], "steps": [], "reward": [], "crashes": [], "outcome": []}
     results = {k: [[] for _ in range(num_envs)] for k in slot}
