@@ -83,10 +83,10 @@ BUDGETS = {
     ),
 }
 """``pes reproduce --budget``: ``paper`` trains each method with its paper preset (the paper's
-episode budgets); ``quick`` with a fifth of the episodes of its quick preset (CBC-TP Net: 1200),
-so that the 3-seed sweep of all methods runs in one to two hours on a 2-core CPU. Neither has a
-wall-clock limit, so a trial does not depend on the machine's speed or load; both evaluate on
-1000 episodes. ``tiny`` runs the whole pipeline in a minute (tests)."""
+episode budgets); ``quick`` with a fifth of the episodes of its quick preset (CBC-TP Net: 1800),
+so that the 3-seed sweep of all methods runs in a few hours on a 2-core CPU (docs/reproduce.md).
+Neither has a wall-clock limit, so a trial does not depend on the machine's speed or load; both
+evaluate on 1000 episodes. ``tiny`` runs the whole pipeline in a minute (tests)."""
 
 DAMAGED = (1, 2)
 """Table VI: pursuers damaged at the start of the CBC-TP Net evaluations."""
