@@ -552,3 +552,24 @@ def test_the_evader_trains_against_pid_pf_on_its_own_map():
     assert boxes != len(make_layout(pes.EnvConfig()).boxes)
     assert len(learner.pursuers.boxes) == boxes
     assert learner.pursuers.env_config.pursuer_max_speed == 8.0
+
+
+def test_preset_none_applies_a_recorded_config_as_it_was(capsys):
+    """A run's config.yaml recorded before the quick preset gained keys: under ``quick`` those
+    keys leak in from today's preset; under ``none`` they take their defaults (as on --resume)."""
+    from pes.config import to_dict
+
+    recorded = to_dict(build_train_config("cbc-tp", "quick"))
+    for key in ("algo", "preset", "disable_crashes_at", "charge_exits"):
+        recorded.pop(key)
+    recorded["env"] = {"evader_policy": "ddpg", "crash_mode": "disable"}
+    with pytest.raises(ConfigError, match="disable_crashes_at"):  # the preset's 0.3 leaks in
+        build_train_config("cbc-tp", "quick", dict(recorded))
+    today = build_train_config("cbc-tp", "quick", dict(recorded, disable_crashes_at=0))
+    assert today.env["disturbance"] and today.env["capture_reward"] == 25 and today.charge_exits
+    again = build_train_config("cbc-tp", "none", dict(recorded))
+    assert again.env == recorded["env"] and again.preset == "none"
+    assert again.disable_crashes_at == 0 and not again.charge_exits
+    assert all(to_dict(again)[k] == v for k, v in recorded.items())
+    assert main(["train", "--algo", "cbc-tp", "--preset", "none"]) == 2
+    assert "--config" in capsys.readouterr().err

@@ -304,6 +304,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     if "algo" in values and values.pop("algo") != args.algo:
         raise ConfigError("the config file names another algo than --algo")
     values.pop("preset", None)
+    if args.preset == "none" and not args.config:
+        raise ConfigError("--preset none re-runs a run's settings: pass its --config config.yaml")
     cfg = build_train_config(args.algo, args.preset, values)
     out = Path(args.out or f"runs/{args.algo}")
     _say(args, f"training {args.algo} ({args.preset} preset) into {out}")
@@ -519,8 +521,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--preset",
         default="quick",
-        choices=["quick", "paper", "tiny"],
-        help="budget preset: quick (laptop CPU, default), paper (the paper's settings), tiny",
+        choices=["quick", "paper", "tiny", "none"],
+        help="budget preset: quick (laptop CPU, default), paper (the paper's settings), tiny; "
+        "none (with --config RUN/config.yaml): the run's settings as recorded, keys it predates "
+        "at their defaults, whatever the presets have become since",
     )
     p.add_argument("--config", metavar="F.yaml", help="TrainConfig values from a YAML file")
     p.add_argument(

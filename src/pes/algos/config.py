@@ -14,7 +14,7 @@ from pes.config import from_dict, to_dict
 from pes.errors import ConfigError
 from pes.sim.config import EnvConfig
 
-Budget = Literal["paper", "quick", "tiny"]
+Budget = Literal["paper", "quick", "tiny", "none"]
 
 
 @dataclass
@@ -26,7 +26,9 @@ class TrainConfig:
     """Algorithm (see ``pes train --help``)."""
     preset: Budget = "quick"
     """Budget preset applied under the user's settings: ``paper`` (the paper's settings),
-    ``quick`` (tuned to learn on a laptop CPU) or ``tiny`` (tests)."""
+    ``quick`` (tuned to learn on a laptop CPU), ``tiny`` (tests) or ``none`` (the defaults
+    below alone: a run's saved ``config.yaml`` applied as it was recorded, whatever the presets
+    have become since; a key the file predates takes its default, as on ``--resume``)."""
     env: dict[str, Any] = field(default_factory=dict)
     """Scenario settings (:class:`pes.EnvConfig` keys) for the training environments."""
     seed: int = 0
@@ -568,15 +570,18 @@ PRESETS["bicnet"] = {
 def build_train_config(
     algo: str, preset: str = "quick", values: dict[str, Any] | None = None
 ) -> TrainConfig:
-    """The configuration of ``algo`` under ``preset``, with ``values`` applied on top.
+    """The configuration of ``algo`` under ``preset`` (``none``: the dataclass defaults), with
+    ``values`` applied on top.
 
     ``values`` may hold an ``env`` mapping, merged key by key into the preset's.
     """
     if algo not in PRESETS:
         raise ConfigError(f"algo must be one of {', '.join(sorted(PRESETS))}, got '{algo}'")
-    if preset not in PRESETS[algo]:
-        raise ConfigError(f"preset must be one of {', '.join(PRESETS[algo])}, got '{preset}'")
-    merged: dict[str, Any] = dict(PRESETS[algo][preset])
+    if preset != "none" and preset not in PRESETS[algo]:
+        raise ConfigError(
+            f"preset must be one of {', '.join(PRESETS[algo])} or none, got '{preset}'"
+        )
+    merged: dict[str, Any] = dict(PRESETS[algo].get(preset, {}))
     merged["env"] = dict(merged.get("env", {}))
     values = dict(values or {})
     if not isinstance(values.get("env", {}), dict):

@@ -89,6 +89,7 @@ between the actor's actions and the starting actor's (``anchor_weight``)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
 RESUMABLE_CHANGES = {
+    "preset",  # only where the values came from: the values themselves are compared
     "episodes",
     "time_limit",
     "checkpoint_every",
