@@ -24,7 +24,10 @@ LOG=$OUT/gpu_log.txt
 t0=$(date +%s)
 part() { echo "== $(( $(date +%s) - t0 )) s: $*" | tee -a "$LOG"; }
 # lim N: N seconds, or what is left of the budget if that is less (at least 1)
-lim() { local left=$(( BUDGET - ($(date +%s) - t0) )); (( left < $1 )) && echo $(( left > 1 ? left : 1 )) || echo "$1"; }
+lim() {
+    local left=$(( BUDGET - ($(date +%s) - t0) ))
+    (( left < $1 )) && echo $(( left > 1 ? left : 1 )) || echo "$1"
+}
 RUN=$(mktemp -d)
 
 part machine
