@@ -1,8 +1,9 @@
 """``TrainConfig``: every setting of a training run, with the ``paper`` and ``quick`` presets.
 
 A run's configuration is built in layers: the dataclass defaults, then the preset of its
-algorithm and budget (:data:`PRESETS`), then a YAML file (``--config``), then ``--set
-key=value`` overrides. Scenario settings go under ``env`` (``--set env.disturbance=true``).
+algorithm and budget (:data:`PRESETS`; none for ``--preset none``, which re-runs a recorded
+``config.yaml`` as it was), then a YAML file (``--config``), then ``--set key=value``
+overrides. Scenario settings go under ``env`` (``--set env.disturbance=true``).
 """
 
 from __future__ import annotations
