@@ -31,7 +31,9 @@ from pes.sim.env import make_env, resolve_device
 
 
 def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
-    cfg = build_train_config(algo, preset, {"device": device})
+    # The learner's own acting and updates: without this, the quick preset's PID(PF)
+    # demonstrations (its first 100,000 transitions) would play through the timed window.
+    cfg = build_train_config(algo, preset, {"device": device, "demo_policy": ""})
     env_cfg = ALGOS[algo].adapt_env(cfg.env_config())
     torch.manual_seed(0)
     learner = ALGOS[algo](cfg, env_cfg, torch.device(device))
