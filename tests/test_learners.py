@@ -15,7 +15,7 @@ import pytest
 import torch
 
 import pes
-from pes.algos.buffer import ReplayBuffer
+from pes.algos.buffer import ReplayBuffer, transition_fields
 from pes.algos.cbc_tp import CBCTP, exit_charge
 from pes.algos.config import build_train_config
 from pes.algos.evader_ddpg import EvaderDDPG
@@ -79,6 +79,43 @@ def test_buffer_bytes_per_transition_and_state_roundtrip():
     clone = ReplayBuffer(40, 4, {"x": ((2,), torch.float32)})
     clone.load_state_dict(buf.state_dict())
     assert clone.next_row == buf.next_row and torch.equal(clone.data["x"], buf.data["x"])
+
+
+def test_n_step_windows_stop_where_the_episode_ends_or_a_pursuer_leaves():
+    """One environment's column: an episode that terminates at its step 3, one truncated after
+    step 1 (the next row starts a new episode), then one where pursuer 1 leaves at step 1."""
+    buf = ReplayBuffer(16, 1, transition_fields(2))
+    ep_steps = [0, 1, 2, 3, 0, 1, 0, 1, 2, 3]
+    terminated = [0, 0, 0, 1, 0, 0, 0, 0, 0, 0]
+    next_alive = [[1, 1]] * 7 + [[1, 0]] + [[1, 0]] * 2
+    alive = [[1, 1]] * 8 + [[1, 0]] * 2
+    for i, step in enumerate(ep_steps):
+        buf.add(
+            state=torch.zeros(1, 3, 8),
+            alive=torch.tensor([alive[i]], dtype=torch.bool),
+            action=torch.zeros(1, 2, 2),
+            reward=torch.tensor([[float(i + 1), 10.0 * (i + 1)]]),
+            next_state=torch.zeros(1, 3, 8),
+            next_alive=torch.tensor([next_alive[i]], dtype=torch.bool),
+            terminated=torch.tensor([bool(terminated[i])]),
+            ep_step=torch.tensor([step], dtype=torch.int32),
+        )
+    row = torch.tensor([0, 2, 3, 4, 5, 6, 7])
+    env = torch.zeros_like(row)
+    ret, last, length = buf.n_step(row, env, 3, 0.5)
+    # row 0: three steps; row 2: stops at the termination (row 3); row 4: at the truncation
+    # (row 6 starts a new episode); row 6: at the exit of pursuer 1 (row 7)
+    assert last.tolist() == [2, 3, 3, 5, 5, 7, 7]
+    assert length.tolist() == [3, 2, 1, 2, 1, 2, 1]
+    expected = [1 + 0.5 * 2 + 0.25 * 3, 3 + 0.5 * 4, 4, 5 + 0.5 * 6, 6, 7 + 0.5 * 8, 8]
+    assert torch.allclose(ret[:, 0], torch.tensor(expected))
+    assert torch.allclose(ret[:, 1], 10 * torch.tensor(expected))
+    one_ret, one_last, one_length = buf.n_step(row, env, 1, 0.5)
+    assert torch.equal(one_last, row) and torch.equal(one_ret, buf.get("reward", row, env))
+    assert one_length.tolist() == [1] * 7
+    # the learners whose update is not CBC-TP's or MADDPG's refuse them
+    with pytest.raises(ConfigError, match="n_step"):
+        build_train_config("maac", "tiny", {"n_step": 3})
 
 
 @pytest.mark.parametrize("n", [1, 3, 5, 8])
@@ -171,7 +208,12 @@ def test_exits_are_charged_their_last_reward_for_the_steps_to_come(tmp_path):
     assert torch.allclose(charge, expected)
     run = tmp_path / "exits"
     summary = _tiny(
-        run, episodes=8, eval_episodes=0, charge_exits=True, env={"crash_mode": "disable"}
+        run,
+        episodes=8,
+        eval_episodes=0,
+        charge_exits=True,
+        n_step=3,  # exits end the n-step windows, and are charged at their last transition
+        env={"crash_mode": "disable"},
     )
     assert summary["updates"] > 0
 

@@ -139,18 +139,18 @@ def test_bad_settings_are_refused():
 
 @pytest.mark.parametrize("algo", BASELINES)
 def test_trains_resumes_and_evaluates(algo, tmp_path, capsys):
-    """A tiny run, resumed to a larger budget; its checkpoint evaluates through ``pes eval``
-    (its policy file is loaded in the test above)."""
+    """A tiny run with n-step TD targets, resumed to a larger budget; its checkpoint evaluates
+    through ``pes eval`` (its policy file is loaded in the test above)."""
     run = tmp_path / "run"
     first = train(
-        build_train_config(algo, "tiny", dict(FAST, episodes=8, eval_episodes=0)),
+        build_train_config(algo, "tiny", dict(FAST, episodes=8, eval_episodes=0, n_step=2)),
         run,
         progress=False,
     )
     assert first["updates"] > 0 and first["algo"] == algo
     ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
     assert ckpt["algo"] == algo and ckpt["buffer"]["filled"] > 0
-    cfg = build_train_config(algo, "tiny", dict(FAST, episodes=16, eval_episodes=4))
+    cfg = build_train_config(algo, "tiny", dict(FAST, episodes=16, eval_episodes=4, n_step=2))
     done = train(cfg, run, resume=True, progress=False)
     assert done["episodes"] >= 16 and done["updates"] > first["updates"]
     assert done["env_steps"] > first["env_steps"] and done["eval"]["episodes"] == 4
@@ -160,7 +160,7 @@ def test_trains_resumes_and_evaluates(algo, tmp_path, capsys):
     assert main([*argv, "--set", "max_steps=20"]) == 0
     assert json.loads(capsys.readouterr().out)["episodes"] == 2
     with pytest.raises(CheckpointError, match="different settings"):
-        other = build_train_config(algo, "tiny", dict(FAST, mlp_hidden=48, episodes=24))
+        other = build_train_config(algo, "tiny", dict(FAST, n_step=1, episodes=24))
         train(other, run, resume=True, progress=False)
 
 

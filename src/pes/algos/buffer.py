@@ -158,6 +158,38 @@ class ReplayBuffer:
             ok &= self.get("ep_step", row, env, ahead) == ep_step + ahead
         return ok
 
+    def n_step(
+        self, row: Tensor, env: Tensor, steps: int, gamma: float
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        """The windows of n-step TD targets (n-step returns, as D4PG and DDPGfD use) of
+        sampled multi-agent transitions (:func:`transition_fields`).
+
+        From each transition at (row, env) the window runs on down the environment's column
+        for at most ``steps`` transitions, while the episode goes on and every pursuer stays in
+        the game: it ends with the transition that terminates the episode, that is the last
+        of it stored (a truncation), or at which a pursuer leaves (``alive`` differs from
+        ``next_alive``). The ``steps - 1`` rows after each index must be stored (sample with
+        ``future=steps - 1``); ``steps=1`` gives the transition itself.
+
+        Returns the window's discounted reward sum ``sum_j gamma^j r_{t+j}`` (B, N), the row
+        of its last transition, whose next state the target bootstraps from (B,), and its
+        length m, 1 to ``steps`` (B,).
+        """
+        data = self.data
+        first_step = data["ep_step"][row, env]
+        ret = data["reward"][row, env]
+        last, length = row, torch.ones_like(row)
+        going = torch.ones_like(row, dtype=torch.bool)
+        for ahead in range(1, steps):
+            stays = (data["alive"][last, env] == data["next_alive"][last, env]).all(-1)
+            going = going & ~data["terminated"][last, env] & stays
+            nxt = (row + ahead) % self.rows
+            going = going & (data["ep_step"][nxt, env] == first_step + ahead)
+            ret = ret + (gamma**ahead) * going.unsqueeze(-1) * data["reward"][nxt, env]
+            last = torch.where(going, nxt, last)
+            length = length + going.long()
+        return ret, last, length
+
     # --- checkpoints ---------------------------------------------------------------------------
     def state_dict(self) -> dict:
         # a copy in host memory, whatever the buffer's device

@@ -7,7 +7,9 @@ One update (Algorithm 1, lines 11-21), from the shared replay storage:
 2. critic: y_i = r_i + gamma * (1 - terminated) * Q'_i(s', a', p'), a' from the target actor on
    s' and the predicted path p' of s' (eqs. 5-6), masked mean over the pursuers alive in s;
    with ``charge_exits``, a pursuer leaving the game (disabled, or its episode failed) adds
-   its last step's reward, crash term aside, times gamma / (1 - gamma);
+   its last step's reward, crash term aside, times gamma / (1 - gamma). With ``n_step`` m > 1
+   the target sums the rewards of up to m transitions of the episode and bootstraps from the
+   last one's next state with gamma^m (:meth:`ReplayBuffer.n_step`);
 3. actor: maximise Q_i(s, a_1..pi(o_i, p)..a_N, p) (eq. 4) for one random alive pursuer i of
    each sample, the others' actions from the buffer (``actor_gradient="one"``), or the mean
    Q_i with every alive pursuer acting (``"all"``), plus a small penalty on the squared
@@ -298,24 +300,27 @@ class CBCTP:
         if len(buf) < cfg.warmup:
             return stats
 
-        row, env = buf.sample_index(cfg.batch_size, gen)
+        row, env = buf.sample_index(cfg.batch_size, gen, future=cfg.n_step - 1)
         state, alive = buf.get("state", row, env), buf.get("alive", row, env)
-        next_state, next_alive = buf.get("next_state", row, env), buf.get("next_alive", row, env)
-        action, reward = buf.get("action", row, env), buf.get("reward", row, env)
-        terminated = buf.get("terminated", row, env)
+        action = buf.get("action", row, env)
+        # the TD target bootstraps from the next state of the n-step window's last transition
+        ret, last, length = buf.n_step(row, env, cfg.n_step, cfg.gamma)
+        next_state, next_alive = buf.get("next_state", last, env), buf.get("next_alive", last, env)
+        terminated = buf.get("terminated", last, env)
         pred = next_pred = None
         if self.tp is not None:
-            pred, next_pred = buf.get("pred", row, env), buf.get("next_pred", row, env)
+            pred, next_pred = buf.get("pred", row, env), buf.get("next_pred", last, env)
         with torch.no_grad():
             next_obs, next_mask = pursuer_obs(next_state, next_alive)
             rel = None if next_pred is None else relative_prediction(next_pred, next_state, n)
             next_action = self.actor_target(next_obs, next_mask, rel)
             q_next = self.critic_target(next_state, next_alive, next_action, next_pred)
             keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
-            y = reward + cfg.gamma * keep * q_next
-            if cfg.charge_exits:
-                y = y + exit_charge(
-                    reward,
+            before_last = (cfg.gamma ** (length - 1).to(q_next.dtype)).unsqueeze(-1)  # (B, 1)
+            y = ret + cfg.gamma * before_last * keep * q_next
+            if cfg.charge_exits:  # exits happen only at a window's last transition
+                y = y + before_last * exit_charge(
+                    buf.get("reward", last, env),
                     alive,
                     next_alive,
                     terminated,

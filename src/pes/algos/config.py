@@ -79,6 +79,11 @@ class TrainConfig:
     lr_tp: float = 1e-3
     tau: float = 1e-2
     """Soft target update rate."""
+    n_step: int = 1
+    """Transitions summed in a TD target before it bootstraps (n-step returns, as D4PG and
+    DDPGfD; 1 = the paper's one-step target), for the OU-noise pursuer learners. The sum stops
+    early where the episode ends or a pursuer leaves the game; the stored actions are not
+    corrected for having been older policies' (they are off-policy, as D4PG's)."""
     buffer_size: int = 1_000_000
     """Transitions kept in the replay buffer."""
     batch_size: int = 512
@@ -236,6 +241,7 @@ class TrainConfig:
             "tp_batch_size",
             "update_every",
             "tp_update_every",
+            "n_step",
             "log_every",
             "rollout_steps",
             "ppo_epochs",
@@ -327,6 +333,11 @@ class TrainConfig:
                 f"demo_transitions must be in [0, buffer_size], got {self.demo_transitions}"
             )
         ou_learners = ("cbc-tp", "cbc", "maddpg", "ddpg", "bicnet")
+        if self.n_step > 1 and self.algo not in ou_learners:
+            raise ConfigError(
+                f"n_step is for the OU-noise pursuer learners ({', '.join(ou_learners)}), "
+                f"not {self.algo}"
+            )
         for name in ("greedy_envs", "critic_warmup"):
             if getattr(self, name) and self.algo not in ou_learners:
                 raise ConfigError(

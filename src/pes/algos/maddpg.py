@@ -179,17 +179,19 @@ class MADDPG(CBCTP):
         docstring); returns the losses and the mean Q."""
         cfg, buf, n = self.cfg, self.buffer, self.n
         self.updates += 1
-        row, env = buf.sample_index(cfg.batch_size, gen)
+        row, env = buf.sample_index(cfg.batch_size, gen, future=cfg.n_step - 1)
         state, alive = buf.get("state", row, env), buf.get("alive", row, env)
-        next_state, next_alive = buf.get("next_state", row, env), buf.get("next_alive", row, env)
-        action, reward = buf.get("action", row, env), buf.get("reward", row, env)
-        terminated = buf.get("terminated", row, env)
+        action = buf.get("action", row, env)
+        ret, last, length = buf.n_step(row, env, cfg.n_step, cfg.gamma)  # as CBC-TP's
+        next_state, next_alive = buf.get("next_state", last, env), buf.get("next_alive", last, env)
+        terminated = buf.get("terminated", last, env)
         with torch.no_grad():
             next_obs, next_mask = pursuer_obs(next_state, next_alive)
             next_action = self.actor_target(next_obs, next_mask)
             q_next = self.critic_target(next_state, next_alive, next_action)
             keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
-            y = reward + cfg.gamma * keep * q_next
+            before_last = (cfg.gamma ** (length - 1).to(q_next.dtype)).unsqueeze(-1)
+            y = ret + cfg.gamma * before_last * keep * q_next
         q = self.critic(state, alive, action)
         critic_loss = masked_mean((q - y) ** 2, alive)
         stats = {
