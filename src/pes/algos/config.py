@@ -406,10 +406,13 @@ QUICK_LEARNER = dict(
 then), and the base of the off-policy baselines' quick presets."""
 QUICK = dict(
     QUICK_LEARNER,
-    # 60 minutes bind, not the episodes (this 2-core CPU plays ~6000 in 49 minutes with both
-    # cores, ~7900 in 60); the noise falls from 0.2 to 0.05 over the first 1800 episodes
-    episodes=9000,
-    noise_decay=0.2,
+    # 60 minutes bind, not the episodes (with n-step targets this 2-core CPU played ~6900 in
+    # 60 minutes on one shared thread); the noise falls from 0.2 to 0.05 over the first 1800
+    episodes=10_000,
+    noise_decay=0.18,
+    # three-step TD targets: 87.8 % after 60 minutes on one shared thread where one-step ones
+    # gave 76.0 % (docs/algorithms/cbc_tp.md, "N-step targets")
+    n_step=3,
     greedy_envs=0.5,
     demo_policy="pid-pf",
     demo_transitions=100_000,
@@ -428,7 +431,7 @@ QUICK = dict(
     ),
 )
 """CBC-TP's quick preset (a laptop CPU, 60 minutes): the learner of :data:`QUICK_LEARNER` with
-PID(PF)'s demonstrations, half the environments without noise, the training reward and
+three-step TD targets, PID(PF)'s demonstrations, half the environments without noise, the training reward and
 disturbance of the shipped swarm's last stage, and crashes that disable once a log row
 captures 30 % (docs/algorithms/cbc_tp.md, "The quick preset rebuilt")."""
 

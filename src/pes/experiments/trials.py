@@ -83,7 +83,7 @@ BUDGETS = {
     ),
 }
 """``pes reproduce --budget``: ``paper`` trains each method with its paper preset (the paper's
-episode budgets); ``quick`` with a fifth of the episodes of its quick preset (CBC-TP Net: 1800),
+episode budgets); ``quick`` with a fifth of the episodes of its quick preset (CBC-TP Net: 2000),
 so that the 3-seed sweep of all methods runs in a few hours on a 2-core CPU (docs/reproduce.md).
 Neither has a wall-clock limit, so a trial does not depend on the machine's speed or load; both
 evaluate on 1000 episodes. ``tiny`` runs the whole pipeline in a minute (tests)."""
