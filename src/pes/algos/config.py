@@ -406,12 +406,12 @@ QUICK_LEARNER = dict(
 then), and the base of the off-policy baselines' quick presets."""
 QUICK = dict(
     QUICK_LEARNER,
-    # 60 minutes bind, not the episodes (with n-step targets this 2-core CPU played ~6900 in
-    # 60 minutes on one shared thread); the noise falls from 0.2 to 0.05 over the first 1800
+    # 60 minutes bind, not the episodes (with n-step targets this 2-core CPU played 9123 in
+    # 60 minutes with both cores); the noise falls from 0.2 to 0.05 over the first 1800
     episodes=10_000,
     noise_decay=0.18,
-    # three-step TD targets: 87.8 % after 60 minutes on one shared thread where one-step ones
-    # gave 76.0 % (docs/algorithms/cbc_tp.md, "N-step targets")
+    # three-step TD targets: 94.6 % after 60 minutes with both cores where one-step ones gave
+    # 77.1 % (docs/algorithms/cbc_tp.md, "N-step targets")
     n_step=3,
     greedy_envs=0.5,
     demo_policy="pid-pf",
