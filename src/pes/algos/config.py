@@ -431,9 +431,10 @@ QUICK = dict(
     ),
 )
 """CBC-TP's quick preset (a laptop CPU, 60 minutes): the learner of :data:`QUICK_LEARNER` with
-three-step TD targets, PID(PF)'s demonstrations, half the environments without noise, the training reward and
-disturbance of the shipped swarm's last stage, and crashes that disable once a log row
-captures 30 % (docs/algorithms/cbc_tp.md, "The quick preset rebuilt")."""
+three-step TD targets, PID(PF)'s demonstrations, half the environments without noise, the
+training reward and disturbance of the shipped swarm's last stage, and crashes that disable
+once a log row captures 30 % (docs/algorithms/cbc_tp.md, "The quick preset rebuilt" and
+"N-step targets")."""
 
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "cbc-tp": {
