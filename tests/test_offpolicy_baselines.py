@@ -160,7 +160,7 @@ def test_trains_resumes_and_evaluates(algo, tmp_path, capsys):
     assert main([*argv, "--set", "max_steps=20"]) == 0
     assert json.loads(capsys.readouterr().out)["episodes"] == 2
     with pytest.raises(CheckpointError, match="different settings"):
-        other = build_train_config(algo, "tiny", dict(FAST, n_step=1, episodes=24))
+        other = build_train_config(algo, "tiny", dict(FAST, mlp_hidden=48, n_step=2, episodes=24))
         train(other, run, resume=True, progress=False)
 
 
