@@ -30,6 +30,8 @@ every ``tp_update_every`` updates; the actor and critic after the warm-up.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import torch
 from torch import Tensor, nn
 
@@ -169,6 +171,27 @@ def exit_charge(
     return exits.to(reward.dtype) * rate * (gamma / (1.0 - gamma))
 
 
+class TDWindows(NamedTuple):
+    """A minibatch of B sampled transitions and their n-step windows (:meth:`CBCTP.sample_windows`):
+    ``row``/``env`` index the transitions and ``last`` the row of each window's last one, all
+    (B,); ``state`` (B, A, 8), ``alive`` (B, N) and ``action`` (B, N, 2) are the transitions';
+    ``ret`` (B, N) the window's discounted reward sum; ``before_last`` (B, 1) gamma^(m-1) for a
+    window of m transitions; ``next_state``, ``next_alive`` and ``terminated`` (B,) are the last
+    transition's, which the TD target bootstraps from."""
+
+    row: Tensor
+    env: Tensor
+    last: Tensor
+    state: Tensor
+    alive: Tensor
+    action: Tensor
+    ret: Tensor
+    before_last: Tensor
+    next_state: Tensor
+    next_alive: Tensor
+    terminated: Tensor
+
+
 class CBCTP:
     """The CBC-TP Net learner (``use_tp=False``: CBC Net)."""
 
@@ -289,6 +312,26 @@ class CBCTP:
             self.buffer.filled > self.history + self.cfg.horizon + 1
         )
 
+    def sample_windows(self, gen: torch.Generator) -> TDWindows:
+        """``batch_size`` sampled transitions, each with the n-step window (``n_step``) its
+        TD target sums and bootstraps from (:meth:`ReplayBuffer.n_step`)."""
+        cfg, buf = self.cfg, self.buffer
+        row, env = buf.sample_index(cfg.batch_size, gen, future=cfg.n_step - 1)
+        ret, last, length = buf.n_step(row, env, cfg.n_step, cfg.gamma)
+        return TDWindows(
+            row=row,
+            env=env,
+            last=last,
+            state=buf.get("state", row, env),
+            alive=buf.get("alive", row, env),
+            action=buf.get("action", row, env),
+            ret=ret,
+            before_last=(cfg.gamma ** (length - 1).to(ret.dtype)).unsqueeze(-1),
+            next_state=buf.get("next_state", last, env),
+            next_alive=buf.get("next_alive", last, env),
+            terminated=buf.get("terminated", last, env),
+        )
+
     def update(self, gen: torch.Generator) -> dict[str, float]:
         """One gradient update of TP Net (every ``tp_update_every`` calls), then (after the
         warm-up) the critic and the actor; returns their metrics."""
@@ -300,13 +343,10 @@ class CBCTP:
         if len(buf) < cfg.warmup:
             return stats
 
-        row, env = buf.sample_index(cfg.batch_size, gen, future=cfg.n_step - 1)
-        state, alive = buf.get("state", row, env), buf.get("alive", row, env)
-        action = buf.get("action", row, env)
-        # the TD target bootstraps from the next state of the n-step window's last transition
-        ret, last, length = buf.n_step(row, env, cfg.n_step, cfg.gamma)
-        next_state, next_alive = buf.get("next_state", last, env), buf.get("next_alive", last, env)
-        terminated = buf.get("terminated", last, env)
+        w = self.sample_windows(gen)
+        row, env, last = w.row, w.env, w.last
+        state, alive, action = w.state, w.alive, w.action
+        next_state, next_alive, terminated = w.next_state, w.next_alive, w.terminated
         pred = next_pred = None
         if self.tp is not None:
             pred, next_pred = buf.get("pred", row, env), buf.get("next_pred", last, env)
@@ -316,10 +356,9 @@ class CBCTP:
             next_action = self.actor_target(next_obs, next_mask, rel)
             q_next = self.critic_target(next_state, next_alive, next_action, next_pred)
             keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
-            before_last = (cfg.gamma ** (length - 1).to(q_next.dtype)).unsqueeze(-1)  # (B, 1)
-            y = ret + cfg.gamma * before_last * keep * q_next
+            y = w.ret + cfg.gamma * w.before_last * keep * q_next
             if cfg.charge_exits:  # exits happen only at a window's last transition
-                y = y + before_last * exit_charge(
+                y = y + w.before_last * exit_charge(
                     buf.get("reward", last, env),
                     alive,
                     next_alive,

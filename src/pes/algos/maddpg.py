@@ -177,21 +177,16 @@ class MADDPG(CBCTP):
     def update(self, gen: torch.Generator) -> dict[str, float]:
         """One critic and one actor step for every pursuer on one minibatch (see the module's
         docstring); returns the losses and the mean Q."""
-        cfg, buf, n = self.cfg, self.buffer, self.n
+        cfg, n = self.cfg, self.n
         self.updates += 1
-        row, env = buf.sample_index(cfg.batch_size, gen, future=cfg.n_step - 1)
-        state, alive = buf.get("state", row, env), buf.get("alive", row, env)
-        action = buf.get("action", row, env)
-        ret, last, length = buf.n_step(row, env, cfg.n_step, cfg.gamma)  # as CBC-TP's
-        next_state, next_alive = buf.get("next_state", last, env), buf.get("next_alive", last, env)
-        terminated = buf.get("terminated", last, env)
+        w = self.sample_windows(gen)
+        state, alive, action = w.state, w.alive, w.action
         with torch.no_grad():
-            next_obs, next_mask = pursuer_obs(next_state, next_alive)
+            next_obs, next_mask = pursuer_obs(w.next_state, w.next_alive)
             next_action = self.actor_target(next_obs, next_mask)
-            q_next = self.critic_target(next_state, next_alive, next_action)
-            keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
-            before_last = (cfg.gamma ** (length - 1).to(q_next.dtype)).unsqueeze(-1)
-            y = ret + cfg.gamma * before_last * keep * q_next
+            q_next = self.critic_target(w.next_state, w.next_alive, next_action)
+            keep = (~w.terminated).unsqueeze(-1).float() * w.next_alive.float()
+            y = w.ret + cfg.gamma * w.before_last * keep * q_next
         q = self.critic(state, alive, action)
         critic_loss = masked_mean((q - y) ** 2, alive)
         stats = {
