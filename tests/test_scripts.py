@@ -82,6 +82,18 @@ def test_pick_swarm_screens_snapshots_and_confirms_the_best(tmp_path):
     assert proc.returncode != 0 and "seed 0" in proc.stderr
 
 
+def test_pick_swarm_ranks_policies_over_the_step_bound_last():
+    ranked = _script("pick_swarm").ranked
+
+    def row(name, success, steps):
+        return {"policy": name, "screen": {"success_rate": success, "mean_steps": steps}}
+
+    rows = [row("slow", 0.97, 230.0), row("fast", 0.94, 190.0), row("faster", 0.94, 180.0)]
+    assert [r["policy"] for r in ranked(rows, "screen")] == ["slow", "faster", "fast"]
+    bounded = ranked(rows, "screen", max_steps=200.0)
+    assert [r["policy"] for r in bounded] == ["faster", "fast", "slow"]
+
+
 def test_behaviour_times_the_phases_of_a_capture_in_order():
     stats = _script("behaviour").measure("pid-pf", episodes=16, seed=0, evader_speed=12.0)
     captures = stats["captures"][0]
