@@ -176,8 +176,8 @@ class TDWindows(NamedTuple):
     ``row``/``env`` index the transitions and ``last`` the row of each window's last one, all
     (B,); ``state`` (B, A, 8), ``alive`` (B, N) and ``action`` (B, N, 2) are the transitions';
     ``ret`` (B, N) the window's discounted reward sum; ``before_last`` (B, 1) gamma^(m-1) for a
-    window of m transitions; ``next_state``, ``next_alive`` and ``terminated`` (B,) are the last
-    transition's, which the TD target bootstraps from."""
+    window of m transitions; ``next_state`` (B, A, 8), ``next_alive`` (B, N) and ``terminated``
+    (B,) are the last transition's, which the TD target bootstraps from."""
 
     row: Tensor
     env: Tensor
