@@ -9,10 +9,8 @@ from pathlib import Path
 
 import torch
 
-from pes.algos import ALGOS
-from pes.algos.config import build_train_config
+from pes.algos import ALGOS, build_train_config, train
 from pes.algos.policy import load_pursuer_policy
-from pes.algos.trainer import train
 from pes.evaluate import evaluate
 
 FAST = dict(compile_env=False, tensorboard=False)

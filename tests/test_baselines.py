@@ -9,13 +9,12 @@ import pytest
 import torch
 
 import pes
-from pes.algos.buffer import RolloutBuffer, gae
-from pes.algos.config import build_train_config
+from pes.algos import build_train_config, train
 from pes.algos.maac import AttentionCritic, SquashedGaussianActor
 from pes.algos.policy import load_pursuer_policy
-from pes.algos.trainer import train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
+from pes.learn.buffer import RolloutBuffer, gae
 from tests.learning import FAST, assert_learns
 
 BASELINES = ("ppo", "maac")

@@ -73,8 +73,8 @@ def test_impossible_values_are_rejected(values, message):
 
 def test_shipped_evaders_load_and_the_default_is_one_of_them():
     """Every evader name the scenario accepts is a shipped model, the default included."""
-    from pes.algos.io import SHIPPED
     from pes.algos.policy import load_evader_actor
+    from pes.models import SHIPPED
     from pes.sim.config import SHIPPED_EVADERS
 
     assert pes.EnvConfig().evader_model in SHIPPED_EVADERS

@@ -14,16 +14,16 @@ import pytest
 import torch
 
 import pes
+from pes.algos import build_train_config
 from pes.algos.cbc_tp import CBCTP
-from pes.algos.config import build_train_config
-from pes.algos.features import other_index
-from pes.algos.io import POLICY_FORMAT, VERSION, save_atomic
 from pes.algos.policy import load_pursuer_policy
 from pes.cli import main
 from pes.config import to_dict
+from pes.learn.checkpoint import POLICY_FORMAT, VERSION, save_atomic
+from pes.learn.features import other_index
 
 pytest.importorskip("onnxruntime")
-from pes.record.onnx_export import export_onnx, onnx_session, other_rows  # noqa: E402
+from pes.algos.cbc_tp_onnx import export_onnx, onnx_session, other_rows  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TOL = 5e-5

@@ -9,16 +9,14 @@ import pytest
 import torch
 
 import pes
-from pes.algos import ALGOS, PURSUER_ALGOS
+from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, train
 from pes.algos.bicnet import BiCNetActor
-from pes.algos.config import build_train_config
 from pes.algos.ddpg import LocalCritics
-from pes.algos.features import pursuer_obs
 from pes.algos.maddpg import CentralCritics, EnsembleMLP, MLPActors
 from pes.algos.policy import load_pursuer_policy
-from pes.algos.trainer import train
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
+from pes.learn.features import pursuer_obs
 from tests.learning import FAST, assert_learns
 
 BASELINES = ("maddpg", "ddpg", "bicnet")

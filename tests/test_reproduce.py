@@ -111,7 +111,7 @@ def test_table6_with_ray(tmp_path):
 def test_budget_training_configs():
     """quick trains each method on a fifth of its quick preset's episodes, no wall-clock limit;
     paper keeps the paper preset's episodes; every trial gets its seed."""
-    from pes.algos.config import build_train_config
+    from pes.algos import build_train_config
 
     for algo in ("cbc-tp", "ppo", "maac"):
         preset = build_train_config(algo, "quick")

@@ -10,10 +10,9 @@ from pathlib import Path
 
 import torch
 
-from pes.algos.config import build_train_config
-from pes.algos.io import POLICY_FORMAT
+from pes.algos import build_train_config, train
 from pes.algos.policy import load_pursuer_policy
-from pes.algos.trainer import train
+from pes.learn.checkpoint import POLICY_FORMAT
 from pes.sim.config import EnvConfig
 from tests.learning import FAST
 

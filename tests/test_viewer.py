@@ -26,7 +26,7 @@ from pes.record.viewer import ASSETS, DEFAULT_BUILDING_HEIGHT, scene_data
 def record_path(tmp_path_factory) -> Path:
     """A real short episode: the shipped swarm (with its predictions) or PID(PF), one damaged
     pursuer, crashes allowed to end the episode."""
-    from pes.algos.io import is_shipped
+    from pes.models import is_shipped
 
     path = tmp_path_factory.mktemp("view") / "episode.json"
     policy = "cbc-tp" if is_shipped("cbc-tp") else "pid-pf"

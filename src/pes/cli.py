@@ -17,7 +17,7 @@ from typing import Any
 
 from pes import __version__
 from pes.config import load_yaml, parse_override
-from pes.errors import ConfigError, PESError
+from pes.errors import ConfigError, PESError, TrainingInterruptedError
 from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
 
@@ -85,7 +85,7 @@ def _non_negative(text: str) -> int:
 def _opponent() -> dict[str, Any]:
     """The default evader of evaluations: the shipped DDPG evader calibrated to the paper's, as
     in the paper (``flee`` if this installation has none)."""
-    from pes.algos.io import default_evader_policy
+    from pes.models import default_evader_policy
 
     return {"evader_policy": default_evader_policy()}
 
@@ -147,7 +147,7 @@ def _test_scenario(args: argparse.Namespace) -> EnvConfig:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from pes.algos.io import is_shipped
+    from pes.models import is_shipped
     from pes.record import save_gif, save_record
 
     start = time.time()
@@ -287,28 +287,30 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from pes.algos.config import build_train_config
-    from pes.algos.trainer import train
+    from pes.algos import build_train_config, train
 
     values: dict[str, Any] = {}
     if args.config:
         values.update(load_yaml(args.config))
-    env_values = dict(values.pop("env", {}) or {})
-    for text in args.overrides:
-        key, value = parse_override(text)
-        if key.startswith("env."):
-            env_values[key[4:]] = value
-        else:
-            values[key] = value
-    values["env"] = env_values
     if "algo" in values and values.pop("algo") != args.algo:
         raise ConfigError("the config file names another algo than --algo")
     values.pop("preset", None)
-    if args.preset == "none" and not args.config:
-        raise ConfigError("--preset none re-runs a run's settings: pass its --config config.yaml")
-    cfg = build_train_config(args.algo, args.preset, values)
+    protocol = args.protocol
+    recorded = values.get("protocol")
+    if isinstance(recorded, dict) and "name" in recorded:  # a run's config.yaml
+        recorded = dict(recorded)
+        name = str(recorded.pop("name")).removesuffix("+custom")
+        values["protocol"] = recorded
+        protocol = protocol or name
+    for text in args.overrides:
+        key, value = parse_override(text)
+        values[key] = value
+    cfg = build_train_config(args.algo, args.preset, values, protocol=protocol)
     out = Path(args.out or f"runs/{args.algo}")
-    _say(args, f"training {args.algo} ({args.preset} preset) into {out}")
+    _say(
+        args,
+        f"training {args.algo} ({args.preset} preset, {cfg.protocol.name} protocol) into {out}",
+    )
     summary = train(cfg, out, resume=args.resume, progress=not args.json)
     if args.json:
         _print_json(summary)
@@ -346,7 +348,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_export_onnx(args: argparse.Namespace) -> int:
-    from pes.record.onnx_export import export_onnx
+    from pes.algos.cbc_tp_onnx import export_onnx
 
     out = Path(args.out)
     if out.suffix.lower() != ".onnx":
@@ -514,27 +516,39 @@ def build_parser() -> argparse.ArgumentParser:
         "train",
         help="train a learner (progress bar, CSV/TensorBoard logs, checkpoints)",
         description="Train an algorithm into --out: config.yaml, progress.csv, tb/, "
-        "checkpoint.pt (every checkpoint_every minutes, atomically), policy.pt and eval.json "
-        "at the end. --resume continues from checkpoint.pt.",
+        "checkpoint.pt (every checkpoint_every minutes, atomically), policy.pt and summary.json "
+        "(with the final evaluation) at the end. --resume continues from checkpoint.pt; Ctrl-C "
+        "stops at the next step with a checkpoint written.",
     )
     p.add_argument("--algo", required=True, choices=list(ALGOS), help="the algorithm")
     p.add_argument(
         "--preset",
         default="quick",
-        choices=["quick", "paper", "tiny", "none"],
-        help="budget preset: quick (laptop CPU, default), paper (the paper's settings), tiny; "
-        "none (with --config RUN/config.yaml): the run's settings as recorded, keys it predates "
-        "at their defaults, whatever the presets have become since",
+        choices=["quick", "paper", "tiny"],
+        help="budget preset: quick (laptop CPU, default), paper (the paper's settings), tiny "
+        "(tests)",
     )
-    p.add_argument("--config", metavar="F.yaml", help="TrainConfig values from a YAML file")
+    p.add_argument(
+        "--protocol",
+        choices=["paper", "pes"],
+        help="training protocol: paper (the paper's reward and rules, no aids; the default of "
+        "--preset paper) or pes (the aids that make learning feasible on a CPU budget; the "
+        "default otherwise). docs/training.md lists the aids",
+    )
+    p.add_argument(
+        "--config",
+        metavar="F.yaml",
+        help="settings from a YAML file, e.g. a run's config.yaml to train it again",
+    )
     p.add_argument(
         "--set",
         metavar="KEY=VALUE",
         action="append",
         default=[],
         dest="overrides",
-        help="override a TrainConfig key (repeatable); env.KEY sets a scenario key, e.g. "
-        "--set batch_size=256 --set env.num_pursuers=4",
+        help="override a setting (repeatable): a run or learner key, env.KEY for the scenario, "
+        "protocol.AID[.KEY] for the protocol, e.g. --set batch_size=256 "
+        "--set env.num_pursuers=4 --set protocol.n_step=5 --set protocol.demonstrations=null",
     )
     p.add_argument("--out", help="run folder (default: runs/ALGO)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
@@ -653,6 +667,9 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, "device", None) is not None:
             resolve_device(args.device)  # before any network is moved there
         return args.func(args)
+    except TrainingInterruptedError as exc:
+        print(f"stopped: {exc}", file=sys.stderr)
+        return 130
     except PESError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USER_ERROR

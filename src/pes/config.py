@@ -19,6 +19,7 @@ import ast
 import dataclasses
 import difflib
 import inspect
+import math
 import re
 import textwrap
 import types
@@ -122,27 +123,40 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
     raise ConfigError(f"{key}: expected {_type_name(hint)}, got {value!r}")
 
 
-def from_dict(cls: type[T], values: dict[str, Any], *, base: T | None = None) -> T:
+def from_dict(
+    cls: type[T], values: dict[str, Any], *, base: T | None = None, label: str | None = None
+) -> T:
     """Build ``cls`` from ``values``, rejecting unknown keys and ill-typed values.
 
     ``base`` (an instance of ``cls``) supplies the values not given; otherwise the defaults.
-    The result is validated when the class has a ``validate()`` method.
+    ``label`` names the configuration in errors (default: the class name). The result is
+    validated when the class has a ``validate()`` method.
     """
+    label = label or cls.__name__
     if not isinstance(values, dict):
-        raise ConfigError(f"a {cls.__name__} must be a mapping of keys to values, got {values!r}")
+        raise ConfigError(f"{label} must be a mapping of keys to values, got {values!r}")
     hints = typing.get_type_hints(cls)
     names = [f.name for f in dataclasses.fields(cls) if f.init]
     for key in values:
         if key not in names:
             close = difflib.get_close_matches(str(key), names, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ConfigError(f"unknown {cls.__name__} key '{key}'{hint}")
+            raise ConfigError(f"unknown {label} key '{key}'{hint}")
     checked = {key: _coerce(value, hints[key], key) for key, value in values.items()}
     obj = dataclasses.replace(base, **checked) if base is not None else cls(**checked)
     validate = getattr(obj, "validate", None)
     if callable(validate):
         validate()
     return obj
+
+
+def check_finite(obj: Any, label: str) -> None:
+    """Raise a :class:`ConfigError` naming the first float field of the dataclass ``obj`` that
+    is NaN or infinite."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(f"{label}.{f.name} must be a finite number, got {value}")
 
 
 def parse_override(text: str) -> tuple[str, Any]:
@@ -178,6 +192,10 @@ def to_dict(obj: Any) -> dict[str, Any]:
     def plain(v: Any) -> Any:
         if isinstance(v, (list, tuple)):
             return [plain(x) for x in v]
+        if dataclasses.is_dataclass(v) and not isinstance(v, type):
+            return to_dict(v)
+        if isinstance(v, dict):
+            return {k: plain(x) for k, x in v.items()}
         return v
 
     return {f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}

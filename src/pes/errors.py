@@ -21,3 +21,7 @@ class ActionError(PESError, ValueError):
 
 class CheckpointError(PESError):
     """A missing, corrupted or incompatible checkpoint or record file."""
+
+
+class TrainingInterruptedError(PESError):
+    """A training run stopped by SIGINT or SIGTERM after writing its checkpoint."""

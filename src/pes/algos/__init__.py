@@ -1,37 +1,49 @@
-"""Learning algorithms on one shared machinery (SPEC §3).
+"""The methods: one file per method, each with its settings (a
+:class:`pes.learn.config.LearnerConfig`), its presets and its learner
+(:class:`pes.learn.learner.Learner`), on the shared machinery of :mod:`pes.learn`.
 
-``ALGOS`` maps each ``pes train --algo`` name to its learner class. Every learner has the same
-surface, used by :func:`pes.algos.trainer.train`: ``adapt_env``, ``act``, ``record``,
-``episode_reset``, ``ready``, ``update``, ``score``, ``modules``, ``optimizers``,
-``policy_modules``, a ``buffer`` (:class:`pes.algos.buffer.ReplayBuffer`, or
-:class:`pes.algos.buffer.RolloutBuffer` for on-policy learners, which set ``on_policy = True``)
-and a ``noise`` process (None where the policy explores by sampling). Pursuer learners also have
-``build_policy`` (used by :func:`pes.algos.policy.load_pursuer_policy`).
+``ALGOS`` (:mod:`pes.algos.registry`) maps each ``pes train --algo`` name to its learner class;
+adding a method is one file and one line there (docs/algorithms/write_your_own.md).
 """
 
 from __future__ import annotations
 
-from pes.algos.bicnet import BiCNet
-from pes.algos.cbc_tp import CBCTP
-from pes.algos.ddpg import DDPG
-from pes.algos.evader_ddpg import EvaderDDPG
-from pes.algos.maac import MAAC
-from pes.algos.maddpg import MADDPG
-from pes.algos.ppo import PPO
+from pathlib import Path
+from typing import Any
 
-ALGOS = {
-    "cbc-tp": CBCTP,
-    "cbc": CBCTP,
-    "maddpg": MADDPG,
-    "ddpg": DDPG,
-    "ppo": PPO,
-    "bicnet": BiCNet,
-    "maac": MAAC,
-    "evader-ddpg": EvaderDDPG,
-}
-"""Algorithm name -> learner class (``cbc`` is CBC-TP Net with ``use_tp=False``)."""
+from pes.algos.policy import load_evader_actor
+from pes.algos.registry import ALGOS, PURSUER_ALGOS, TABLE4_ALGOS, learner_class
+from pes.learn import config, trainer
+from pes.sim.evader import register_model_loader
 
-PURSUER_ALGOS = ("cbc-tp", "cbc", "maddpg", "ddpg", "ppo", "bicnet", "maac")
-"""Algorithms whose policy controls the pursuers (``pes eval --policy``)."""
+register_model_loader(load_evader_actor)
 
-__all__ = ["ALGOS", "PURSUER_ALGOS"]
+
+def build_train_config(
+    algo: str,
+    preset: str = "quick",
+    values: dict[str, Any] | None = None,
+    protocol: str | None = None,
+) -> config.TrainConfig:
+    """The configuration of ``algo`` under its ``preset`` and the training ``protocol`` (by
+    default ``paper`` for the paper preset and the method's default otherwise), with
+    ``values`` on top (see :func:`pes.learn.config.build_train_config`)."""
+    cls = learner_class(algo)
+    if protocol is None and not isinstance((values or {}).get("protocol"), str):
+        protocol = "paper" if preset == "paper" else cls.default_protocol
+    return config.build_train_config(algo, cls.Config, cls.PRESETS, preset, protocol, values)
+
+
+def train(cfg: config.TrainConfig, out: str | Path, resume: bool = False, progress: bool = True):
+    """Train the method ``cfg.algo`` into the folder ``out`` (:func:`pes.learn.trainer.train`)."""
+    return trainer.train(cfg, out, learner_class(cfg.algo), resume=resume, progress=progress)
+
+
+__all__ = [
+    "ALGOS",
+    "PURSUER_ALGOS",
+    "TABLE4_ALGOS",
+    "build_train_config",
+    "learner_class",
+    "train",
+]

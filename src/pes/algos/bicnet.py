@@ -3,10 +3,10 @@ RNN runs across the pursuers, in index order, in both the actor and the critic; 
 cell outputs its own action (actor) or its own Q (critic), and the RNN's hidden states are the
 agents' communication channel.
 
-It trains on CBC-TP's machinery (:class:`pes.algos.cbc_tp.CBCTP`) with ``use_tp=False`` and
-``actor_gradient="all"``: BiCNet's actor gradient sums over every agent's Q the gradients through
-every agent's action, all of which come from the one actor (eq. 8 of Peng et al.). The critic is
-CBC-TP's (:class:`pes.algos.nets.CBCCritic` without a prediction), which is BiCNet's: a
+It trains on the deterministic actor-critic of :mod:`pes.learn.actor_critic` with its
+centralised actor gradient: BiCNet's actor gradient sums over every agent's Q the gradients
+through every agent's action, all of which come from the one actor (eq. 8 of Peng et al.). The
+critic is CBC Net's (:class:`pes.algos.cbc_tp.CBCCritic` without a prediction), which is BiCNet's: a
 bidirectional LSTM across the pursuers, cell j holding pursuer j's global-state row, the
 evader's row, j's action and an alive flag. What differs from CBC Net is the actor: BiCNet's
 crosses the team once for all agents (cell j: pursuer j's own observation row) instead of
@@ -19,14 +19,56 @@ the losses. The networks serve any number of pursuers.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import torch
 from torch import Tensor, nn
 
-from pes.algos.cbc_tp import CBCTP, PursuerCritics
-from pes.algos.config import TrainConfig
-from pes.algos.nets import RowScaled, mlp
-from pes.errors import ConfigError
-from pes.sim.config import EnvConfig
+from pes.algos.cbc_tp import CBCCritic
+from pes.learn.actor_critic import ActorCritic, ActorCriticConfig
+from pes.learn.nets import RowScaled, mlp
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+
+
+@dataclass
+class BiCNetConfig(ActorCriticConfig):
+    """BiCNet's settings (the paper gives none for its baselines: CBC-TP Net's, §V-A)."""
+
+    hidden: int = 256
+    """Units of the actor's and the critic's bidirectional LSTM (each direction)."""
+    mlp_hidden: int = 64
+    """Units of the MLP after each LSTM."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (*ActorCriticConfig.POSITIVE, "hidden", "mlp_hidden")
+
+
+BICNET_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
+    # CBC Net's quick learner (its LSTMs cost about as much per update)
+    "quick": dict(
+        QUICK_RUN,
+        episodes=2000,
+        hidden=64,
+        mlp_hidden=64,
+        lr_actor=5e-4,
+        lr_critic=1e-3,
+        buffer_size=300_000,
+        batch_size=256,
+        update_every=32,
+        warmup=10_000,
+    ),
+    "tiny": dict(
+        TINY_RUN,
+        hidden=32,
+        mlp_hidden=32,
+        buffer_size=20_000,
+        batch_size=64,
+        update_every=8,
+        warmup=500,
+        protocol=TINY_PROTOCOL,
+    ),
+}
 
 
 class BiCNetActor(RowScaled):
@@ -35,10 +77,10 @@ class BiCNetActor(RowScaled):
     alive flag; each cell's output -> MLP (``mlp_hidden``, ReLU) -> tanh -> pursuer j's desired
     acceleration. The last layer starts within +-3e-3, as CBC-TP's."""
 
-    def __init__(self, cfg: TrainConfig) -> None:
-        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
-        self.lstm = nn.LSTM(9, cfg.hidden, batch_first=True, bidirectional=True)
-        self.head = mlp([2 * cfg.hidden, cfg.mlp_hidden, 2])
+    def __init__(self, lc: BiCNetConfig) -> None:
+        super().__init__(0, lc.obstacle_scale, lc.target_scale)
+        self.lstm = nn.LSTM(9, lc.hidden, batch_first=True, bidirectional=True)
+        self.head = mlp([2 * lc.hidden, lc.mlp_hidden, 2])
         nn.init.uniform_(self.head[-1].weight, -3e-3, 3e-3)
         nn.init.uniform_(self.head[-1].bias, -3e-3, 3e-3)
 
@@ -55,24 +97,31 @@ class BiCNetActor(RowScaled):
         return torch.tanh(self.pre_activation(obs, mask))
 
 
-class BiCNet(CBCTP):
-    """The BiCNet learner (``algo: bicnet``)."""
+class BiCNetCritic(nn.Module):
+    """BiCNet's critic: CBC Net's (:class:`pes.algos.cbc_tp.CBCCritic`), one for all pursuers."""
+
+    def __init__(self, lc: BiCNetConfig) -> None:
+        super().__init__()
+        self.nets = nn.ModuleList(
+            [CBCCritic(lc.hidden, lc.mlp_hidden, 0, lc.obstacle_scale, lc.target_scale)]
+        )
+
+    def forward(self, state: Tensor, alive: Tensor, actions: Tensor, pred: Tensor | None = None):
+        """state (B, A, 8), alive (B, N), actions (B, N, 2) -> Q (B, N)."""
+        return self.nets[0](state, alive, actions, None)
+
+
+class BiCNet(ActorCritic):
+    """The BiCNet learner (``--algo bicnet``): the base class's centralised actor gradient."""
 
     name = "bicnet"
-
-    def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
-        if cfg.use_tp:
-            raise ConfigError("bicnet has no TP Net: set use_tp=false")
-        if not cfg.shared:
-            raise ConfigError("bicnet's networks span all pursuers: shared must be true")
-        if cfg.actor_gradient != "all":
-            raise ConfigError("bicnet's actor acts for every pursuer: actor_gradient must be all")
-        super().__init__(cfg, env_cfg, device)
+    Config = BiCNetConfig
+    PRESETS = BICNET_PRESETS
 
     @staticmethod
-    def make_actor(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        return BiCNetActor(cfg)
+    def make_actor(lc: BiCNetConfig, num_pursuers: int) -> nn.Module:
+        return BiCNetActor(lc)
 
     @staticmethod
-    def make_critic(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        return PursuerCritics(cfg, num_pursuers)
+    def make_critic(lc: BiCNetConfig, num_pursuers: int) -> nn.Module:
+        return BiCNetCritic(lc)

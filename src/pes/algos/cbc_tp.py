@@ -1,15 +1,15 @@
 """CBC-TP Net (paper §III-IV, Algorithm 1) and, with ``use_tp=False``, CBC Net.
 
-One update (Algorithm 1, lines 11-21), from the shared replay storage:
+The networks, the method's settings and presets, and the learner. CBC-TP Net trains on the
+deterministic actor-critic of :mod:`pes.learn.actor_critic`; one update (Algorithm 1, lines
+11-21), from the shared replay storage:
 
 1. TP Net: a minibatch of J history windows (n frames) and the evader's next k positions,
    loss eq. (7) (mean squared error in arena units);
 2. critic: y_i = r_i + gamma * (1 - terminated) * Q'_i(s', a', p'), a' from the target actor on
    s' and the predicted path p' of s' (eqs. 5-6), masked mean over the pursuers alive in s;
-   with ``charge_exits``, a pursuer leaving the game (disabled, or its episode failed) adds
-   its last step's reward, crash term aside, times gamma / (1 - gamma). With ``n_step`` m > 1
-   the target sums the rewards of up to m transitions of the episode and bootstraps from the
-   last one's next state with gamma^m (:meth:`ReplayBuffer.n_step`);
+   the training protocol may make it an n-step target and charge pursuers that leave the
+   game (:mod:`pes.learn.td`);
 3. actor: maximise Q_i(s, a_1..pi(o_i, p)..a_N, p) (eq. 4) for one random alive pursuer i of
    each sample, the others' actions from the buffer (``actor_gradient="one"``), or the mean
    Q_i with every alive pursuer acting (``"all"``), plus a small penalty on the squared
@@ -30,30 +30,240 @@ every ``tp_update_every`` updates; the actor and critic after the warm-up.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import torch
 from torch import Tensor, nn
 
-from pes.algos.buffer import ReplayBuffer, transition, transition_fields
-from pes.algos.common import masked_mean, optimise, soft_update, target_copy
-from pes.algos.config import TrainConfig
-from pes.algos.features import frames, pursuer_obs, relative_prediction
-from pes.algos.nets import CBCActor, CBCCritic, TPNet
-from pes.algos.noise import OUNoise
-from pes.policies import SCRIPTED
+from pes.errors import ConfigError
+from pes.learn.actor_critic import ActorCritic, ActorCriticConfig, DeterministicPolicy
+from pes.learn.common import masked_mean, optimise
+from pes.learn.config import TrainConfig
+from pes.learn.features import frames, pursuer_obs, relative_prediction
+from pes.learn.nets import RowScaled, mlp
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.td import TDWindows
 from pes.sim.config import EnvConfig
+
+
+@dataclass
+class CBCNetConfig(ActorCriticConfig):
+    """CBC Net's settings (the paper's, §V-A and Table II, by default)."""
+
+    hidden: int = 256
+    """Units of the actor's and the critic's bidirectional LSTM (each direction)."""
+    mlp_hidden: int = 64
+    """Units of the MLP after the LSTM."""
+    shared: bool = True
+    """One actor and one critic for all pursuers (False: one per pursuer, as Algorithm 1)."""
+    actor_gradient: str = "one"
+    """Actor update: ``one`` (one random alive pursuer per sample takes the current actor's
+    action, the others keep their stored ones, as MADDPG) or ``all`` (every alive pursuer
+    takes it at once; the actor ascends the mean of their Qs)."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (
+        *ActorCriticConfig.POSITIVE,
+        "hidden",
+        "mlp_hidden",
+    )
+
+    def check(self) -> None:
+        if self.actor_gradient not in ("one", "all"):
+            raise ConfigError(f"actor_gradient must be one or all, got '{self.actor_gradient}'")
+
+
+@dataclass
+class CBCTPConfig(CBCNetConfig):
+    """CBC-TP Net's settings: CBC Net's and TP Net's."""
+
+    tp_hidden: int = 256
+    """Units of each TP Net LSTM layer."""
+    tp_layers: int = 2
+    """TP Net LSTM layers."""
+    horizon: int = 3
+    """k: future evader positions TP Net predicts (the actor sees 2k numbers)."""
+    lr_tp: float = 1e-3
+    """Adam learning rate of TP Net."""
+    tp_batch_size: int = 512
+    """Minibatch of the TP Net updates (J)."""
+    tp_update_every: int = 1
+    """Critic/actor updates per TP Net update (TP Net converges long before the others)."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (
+        *CBCNetConfig.POSITIVE,
+        "tp_hidden",
+        "tp_layers",
+        "horizon",
+        "lr_tp",
+        "tp_batch_size",
+        "tp_update_every",
+    )
+
+
+def prediction_size(lc: CBCNetConfig) -> int:
+    """Numbers of the predicted path each pursuer sees: 2k with TP Net, 0 without."""
+    return 2 * lc.horizon if isinstance(lc, CBCTPConfig) else 0
+
+
+PAPER_LEARNER: dict[str, Any] = dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg"))
+"""The paper's settings (§V-A): the dataclass defaults, 4000 episodes from one environment."""
+
+QUICK_LEARNER: dict[str, Any] = dict(
+    hidden=64,
+    mlp_hidden=64,
+    lr_actor=5e-4,
+    lr_critic=1e-3,
+    buffer_size=300_000,
+    batch_size=256,
+    update_every=32,
+    warmup=10_000,
+)
+"""The learner settings of CBC Net's quick preset (a laptop CPU)."""
+
+TINY_LEARNER: dict[str, Any] = dict(
+    hidden=32, mlp_hidden=32, buffer_size=20_000, batch_size=64, update_every=8, warmup=500
+)
+
+CBC_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": PAPER_LEARNER,
+    "quick": {**QUICK_RUN, "episodes": 10_000, **QUICK_LEARNER},
+    "tiny": {**TINY_RUN, **TINY_LEARNER, "protocol": TINY_PROTOCOL},
+}
+"""CBC Net's presets: ``quick`` plays 60 minutes on a laptop CPU (10,000 episodes do not bind)."""
+
+TP_QUICK = dict(tp_hidden=64, lr_tp=1e-3, tp_batch_size=256, tp_update_every=4)
+CBC_TP_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": PAPER_LEARNER,
+    "quick": {**CBC_PRESETS["quick"], **TP_QUICK},
+    "tiny": {**CBC_PRESETS["tiny"], "tp_hidden": 32, "tp_batch_size": 64},
+}
+"""CBC-TP Net's presets: CBC Net's, with TP Net's settings."""
+
+
+class TPNet(nn.Module):
+    """Target prediction (Fig. 3, eq. 7): an LSTM over the last n frames that predicts the
+    evader's next k positions.
+
+    Each frame is summarised so that one network serves any number of pursuers: the evader's
+    [position, velocity] and, relative to it, the mean [position, velocity] of the alive
+    pursuers and the nearest alive pursuer's (12 numbers). The LSTM's last output goes through
+    a linear layer to k displacements from the evader's current position.
+    """
+
+    FRAME_FEATURES = 12
+
+    def __init__(self, hidden: int = 256, layers: int = 2, horizon: int = 3) -> None:
+        super().__init__()
+        self.horizon = horizon
+        self.lstm = nn.LSTM(self.FRAME_FEATURES, hidden, num_layers=layers, batch_first=True)
+        self.head = nn.Linear(hidden, 2 * horizon)
+
+    @staticmethod
+    def summarise(frames: Tensor) -> Tensor:
+        """(..., n, A, 4) history frames -> (..., n, 12) frame features."""
+        evader = frames[..., -1, :]
+        rel = frames[..., :-1, :] - evader.unsqueeze(-2)
+        present = frames[..., :-1, :].abs().sum(-1) > 0  # dead pursuers and padding are zero
+        w = present.unsqueeze(-1).to(frames.dtype)
+        mean = (rel * w).sum(-2) / w.sum(-2).clamp(min=1.0)
+        gap = (rel[..., :2] ** 2).sum(-1).masked_fill(~present, float("inf"))
+        nearest = gap.argmin(-1, keepdim=True)
+        near = rel.gather(-2, nearest.unsqueeze(-1).expand(*nearest.shape, 4)).squeeze(-2)
+        near = near * present.any(-1, keepdim=True).to(frames.dtype)
+        return torch.cat([evader, mean, near], dim=-1)
+
+    def forward(self, frames: Tensor) -> Tensor:
+        """(B, n, A, 4) history frames, oldest first -> (B, k, 2) predicted evader positions."""
+        out, _ = self.lstm(self.summarise(frames))
+        disp = self.head(out[:, -1]).view(-1, self.horizon, 2)
+        return frames[:, -1, -1, :2].unsqueeze(1) + disp
+
+
+class CBCActor(RowScaled):
+    """The CBC actor (Fig. 4a): a bidirectional LSTM across the agents of one pursuer's
+    observation, with the pursuer itself at the first and the last cell, joined with the
+    predicted evader path (relative to the pursuer) and an MLP to the desired acceleration.
+
+    Each cell's input is the observation row (8, scaled by :class:`RowScaled`) and a 1/0 flag
+    saying whether the row is real; masked rows are zero, so any number of alive pursuers goes
+    through the same network. The last layer starts near zero (as DDPG's), so that the untrained
+    swarm hovers instead of flying into the nearest wall.
+    """
+
+    def __init__(
+        self,
+        hidden: int = 256,
+        mlp_hidden: int = 64,
+        pred_dim: int = 6,
+        obstacle_scale: float = 1.0,
+        target_scale: float = 1.0,
+    ) -> None:
+        super().__init__(pred_dim, obstacle_scale, target_scale)
+        self.hidden = hidden
+        self.lstm = nn.LSTM(9, hidden, batch_first=True, bidirectional=True)
+        self.head = mlp([2 * hidden + pred_dim, mlp_hidden, 2])
+        nn.init.uniform_(self.head[-1].weight, -3e-3, 3e-3)
+        nn.init.uniform_(self.head[-1].bias, -3e-3, 3e-3)
+
+    def pre_activation(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, 8), mask (B, N), pred (B, pred_dim) or None -> (B, 2) before the tanh."""
+        cells = torch.cat([obs * self.scale, mask.unsqueeze(-1).to(obs.dtype)], dim=-1)
+        seq = torch.cat([cells, cells[:, :1]], dim=1)  # self first and last
+        out, _ = self.lstm(seq)
+        h = self.hidden
+        feat = torch.cat([out[:, -1, :h], out[:, 0, h:]], dim=-1)
+        if self.pred_dim:
+            feat = torch.cat([feat, pred * self.target_scale], dim=-1)
+        return self.head(feat)
+
+    def forward(self, obs: Tensor, mask: Tensor, pred: Tensor | None) -> Tensor:
+        """obs (B, N, 8), mask (B, N), pred (B, pred_dim) or None -> actions (B, 2) in [-1, 1]."""
+        return torch.tanh(self.pre_activation(obs, mask, pred))
+
+
+class CBCCritic(RowScaled):
+    """The centralised critic (Fig. 4b): a bidirectional LSTM across all pursuers, each cell
+    holding that pursuer's global-state row (8), the evader's [position, velocity, obstacle
+    vector] (6), its action (2), the predicted evader path relative to it (2k) and an alive
+    flag; an MLP (64) on each cell's output gives that pursuer's Q. Rows are scaled as the
+    actor's (:class:`RowScaled`)."""
+
+    def __init__(
+        self,
+        hidden: int = 256,
+        mlp_hidden: int = 64,
+        pred_dim: int = 6,
+        obstacle_scale: float = 1.0,
+        target_scale: float = 1.0,
+    ) -> None:
+        super().__init__(pred_dim, obstacle_scale, target_scale)
+        self.lstm = nn.LSTM(8 + 6 + 2 + pred_dim + 1, hidden, batch_first=True, bidirectional=True)
+        self.head = mlp([2 * hidden, mlp_hidden, 1])
+
+    def forward(self, state: Tensor, alive: Tensor, actions: Tensor, pred: Tensor | None) -> Tensor:
+        """state (B, A, 8), alive (B, N), actions (B, N, 2), pred (B, k, 2) -> Q (B, N)."""
+        n = alive.shape[-1]
+        state = state * self.scale
+        evader = state[:, -1:, :6].expand(-1, n, -1)
+        parts = [state[:, :n], evader, actions * alive.unsqueeze(-1)]
+        if self.pred_dim:
+            rel = relative_prediction(pred, state, n) * self.target_scale
+            parts.append(rel * alive.unsqueeze(-1))
+        parts.append(alive.unsqueeze(-1).to(state.dtype))
+        out, _ = self.lstm(torch.cat(parts, dim=-1))
+        return self.head(out).squeeze(-1)
 
 
 class PursuerActors(nn.Module):
     """One :class:`CBCActor` shared by all pursuers, or one per pursuer."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+    def __init__(self, lc: CBCNetConfig, num_pursuers: int) -> None:
         super().__init__()
-        count = 1 if cfg.shared else num_pursuers
-        pred_dim = 2 * cfg.horizon if cfg.use_tp else 0
+        count = 1 if lc.shared else num_pursuers
+        pred_dim = prediction_size(lc)
         self.nets = nn.ModuleList(
-            CBCActor(cfg.hidden, cfg.mlp_hidden, pred_dim, cfg.obstacle_scale, cfg.target_scale)
+            CBCActor(lc.hidden, lc.mlp_hidden, pred_dim, lc.obstacle_scale, lc.target_scale)
             for _ in range(count)
         )
 
@@ -97,12 +307,12 @@ class PursuerCritics(nn.Module):
     """One :class:`CBCCritic` shared by all pursuers, or one per pursuer (pursuer i reads its Q
     from its own critic's cell i)."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+    def __init__(self, lc: CBCNetConfig, num_pursuers: int) -> None:
         super().__init__()
-        count = 1 if cfg.shared else num_pursuers
-        pred_dim = 2 * cfg.horizon if cfg.use_tp else 0
+        count = 1 if lc.shared else num_pursuers
+        pred_dim = prediction_size(lc)
         self.nets = nn.ModuleList(
-            CBCCritic(cfg.hidden, cfg.mlp_hidden, pred_dim, cfg.obstacle_scale, cfg.target_scale)
+            CBCCritic(lc.hidden, lc.mlp_hidden, pred_dim, lc.obstacle_scale, lc.target_scale)
             for _ in range(count)
         )
 
@@ -115,16 +325,13 @@ class PursuerCritics(nn.Module):
         )
 
 
-class CBCTPPolicy(nn.Module):
+class CBCTPPolicy(DeterministicPolicy):
     """The trained swarm as a :class:`pes.policies.Policy`: TP Net's prediction from
     ``info["history"]``, then the actor on each pursuer's observation."""
 
     def __init__(self, actor: PursuerActors, tp: TPNet | None) -> None:
-        super().__init__()
-        self.actor = actor
+        super().__init__(actor)
         self.tp = tp
-        self.last_prediction: Tensor | None = None
-        """(E, k, 2) the latest predicted evader positions in metres-free arena units."""
 
     def predict(self, info: dict[str, Tensor]) -> Tensor | None:
         """(E, k, 2) predicted normalised evader positions, or None without TP Net."""
@@ -132,346 +339,104 @@ class CBCTPPolicy(nn.Module):
             return None
         return self.tp(info["history"])
 
-    @torch.no_grad()
-    def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
-        return self.act(obs, info)
-
     def act(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
         pred = self.predict(info)
         self.last_prediction = pred
         rel = None if pred is None else relative_prediction(pred, info["state"], obs.shape[1])
         return self.actor(obs, info["obs_mask"], rel)
 
-    def reset(self, mask: Tensor | None = None) -> None:
-        """Stateless between steps (the history comes from the environment)."""
 
+class CBCNet(ActorCritic):
+    """The CBC Net learner (``--algo cbc``): CBC-TP Net without TP Net (the ablation of §V-C)."""
 
-def exit_charge(
-    reward: Tensor,
-    alive: Tensor,
-    next_alive: Tensor,
-    terminated: Tensor,
-    gamma: float,
-    capture_count: int,
-    crash_reward: float,
-) -> Tensor:
-    """What a pursuer leaving the game still owes, added to its TD target (``charge_exits``).
-
-    A pursuer alive in s leaves when it is not alive in s' (a crash under
-    ``crash_mode="disable"``) or when the episode terminates with fewer than ``capture_count``
-    pursuers alive (a failure). It is charged its last step's reward, the crash term aside, for
-    every step to come: ``rate * gamma / (1 - gamma)``, as if it hovered where it left until the
-    episode's end. Shapes: ``reward``, ``alive``, ``next_alive`` (B, N); ``terminated`` (B,);
-    returns (B, N), zero for pursuers that stay.
-    """
-    lost = alive & ~next_alive
-    failed = terminated & (next_alive.sum(-1) < capture_count)
-    exits = lost | (alive & failed.unsqueeze(-1))
-    rate = reward - crash_reward * lost.to(reward.dtype)
-    return exits.to(reward.dtype) * rate * (gamma / (1.0 - gamma))
-
-
-class TDWindows(NamedTuple):
-    """A minibatch of B sampled transitions and their n-step windows (:meth:`CBCTP.sample_windows`):
-    ``row``/``env`` index the transitions and ``last`` the row of each window's last one, all
-    (B,); ``state`` (B, A, 8), ``alive`` (B, N) and ``action`` (B, N, 2) are the transitions';
-    ``ret`` (B, N) the window's discounted reward sum; ``before_last`` (B, 1) gamma^(m-1) for a
-    window of m transitions; ``next_state`` (B, A, 8), ``next_alive`` (B, N) and ``terminated``
-    (B,) are the last transition's, which the TD target bootstraps from."""
-
-    row: Tensor
-    env: Tensor
-    last: Tensor
-    state: Tensor
-    alive: Tensor
-    action: Tensor
-    ret: Tensor
-    before_last: Tensor
-    next_state: Tensor
-    next_alive: Tensor
-    terminated: Tensor
-
-
-class CBCTP:
-    """The CBC-TP Net learner (``use_tp=False``: CBC Net)."""
-
-    name = "cbc-tp"
-
-    def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
-        self.cfg = cfg
-        self.n = env_cfg.num_pursuers
-        self.history = env_cfg.history_length
-        self.capture_count, self.crash_reward = env_cfg.capture_count, env_cfg.crash_reward
-        self.device = device
-        self.actor = self.make_actor(cfg, self.n).to(device)
-        self.critic = self.make_critic(cfg, self.n).to(device)
-        self.tp = (
-            TPNet(cfg.tp_hidden, cfg.tp_layers, cfg.horizon).to(device) if cfg.use_tp else None
-        )
-        self.actor_target = target_copy(self.actor)
-        self.critic_target = target_copy(self.critic)
-        # ``anchor_weight``: a frozen copy of the actor the run started from (``init_from``)
-        self.anchor = target_copy(self.actor) if cfg.anchor_weight > 0 else None
-        self.policy = CBCTPPolicy(self.actor, self.tp)
-        self.target_policy = CBCTPPolicy(self.actor_target, self.tp)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
-        self.opt_tp = (
-            torch.optim.Adam(self.tp.parameters(), lr=cfg.lr_tp) if self.tp is not None else None
-        )
-        fields = transition_fields(self.n)
-        if cfg.use_tp:  # TP Net's predictions at s and s', inputs of the actor and the critic
-            fields["pred"] = fields["next_pred"] = ((cfg.horizon, 2), torch.float32)
-        self.demo = None
-        if cfg.demo_policy:  # demonstrations, marked in the buffer for the actor's BC term
-            self.demo = SCRIPTED[cfg.demo_policy](env_cfg)
-            fields["demo"] = ((), torch.bool)
-        self.buffer = ReplayBuffer(cfg.buffer_size, cfg.num_envs, fields, device)
-        self.noise = OUNoise((cfg.num_envs, self.n, 2), cfg.noise_theta, 1.0, device=device)
-        # (E, 1, 1) 1 for the environments that explore, 0 for the last greedy_envs share
-        greedy = round(cfg.greedy_envs * cfg.num_envs)
-        self.explore = (torch.arange(cfg.num_envs, device=device) < cfg.num_envs - greedy).float()
-        self.explore = self.explore[:, None, None]
-        self.updates = 0
+    name = "cbc"
+    Config = CBCNetConfig
+    PRESETS = CBC_PRESETS
 
     @staticmethod
-    def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
-        """The training scenario (unchanged: the configured evader plays)."""
-        return env_cfg
-
-    # A baseline that trains like CBC-TP with other networks overrides these two (and
-    # ``fixed_swarm``); see maddpg.py and bicnet.py.
-    @staticmethod
-    def make_actor(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        """The actor: ``(obs (B, N, N, 8), mask (B, N, N), pred (B, N, 2k) or None)`` ->
-        actions (B, N, 2), with ``pre_activation`` (before the tanh) beside ``forward``."""
-        return PursuerActors(cfg, num_pursuers)
+    def make_actor(lc: CBCNetConfig, num_pursuers: int) -> nn.Module:
+        return PursuerActors(lc, num_pursuers)
 
     @staticmethod
-    def make_critic(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        """The critic: ``(state (B, A, 8), alive (B, N), actions (B, N, 2), pred)`` -> Q (B, N)."""
-        return PursuerCritics(cfg, num_pursuers)
+    def make_critic(lc: CBCNetConfig, num_pursuers: int) -> nn.Module:
+        return PursuerCritics(lc, num_pursuers)
 
     @staticmethod
     def fixed_swarm(cfg: TrainConfig) -> str | None:
-        """Why a trained policy only serves the swarm size it was trained on (None if it
-        serves any)."""
-        return None if cfg.shared else "has one network per pursuer"
+        return None if cfg.learner.shared else "has one network per pursuer"
 
-    # --- acting ----------------------------------------------------------------------------------
+    def actor_step(
+        self, w: TDWindows, pred: Tensor | None, gen: torch.Generator, stats: dict[str, float]
+    ) -> Tensor:
+        """Actor (eq. 4). ``one``: in each sample one alive pursuer acts with the current actor
+        and the others keep their stored actions (MADDPG's per-agent gradient); ``all``: every
+        alive pursuer acts with it at once (the base class's centralised gradient), N times the
+        gradient samples for one critic pass."""
+        if self.lc.actor_gradient == "all" or (self.demonstrating() and self.bc_weight > 0):
+            return super().actor_step(w, pred, gen, stats)
+        obs, mask, rel = self.observe(w.state, w.alive, pred)
+        # the sampler's generator lives on the CPU (one RNG stream whatever the device)
+        weights = w.alive.float().cpu() + 1e-6
+        pick = torch.multinomial(weights, 1, generator=gen).squeeze(1).to(w.state.device)
+        b = torch.arange(len(w.row), device=w.state.device)
+        rel = None if rel is None else rel[b, pick]
+        pre = self.actor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
+        chosen = torch.nn.functional.one_hot(pick, self.n).bool() & w.alive
+        new_action = torch.where(chosen.unsqueeze(-1), torch.tanh(pre).unsqueeze(1), w.action)
+        pre = pre.unsqueeze(1) * chosen.unsqueeze(-1)
+        q_pi = self.frozen_critic(w.state, w.alive, new_action, pred)
+        return self.actor_objective(q_pi, pre, chosen, new_action, w, stats)
+
+
+class CBCTP(CBCNet):
+    """The CBC-TP Net learner (``--algo cbc-tp``): CBC Net and TP Net."""
+
+    name = "cbc-tp"
+    Config = CBCTPConfig
+    PRESETS = CBC_TP_PRESETS
+
+    def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
+        lc = cfg.learner
+        self.tp = TPNet(lc.tp_hidden, lc.tp_layers, lc.horizon).to(device)
+        self.opt_tp = torch.optim.Adam(self.tp.parameters(), lr=lc.lr_tp)
+        self.history = env_cfg.history_length
+        super().__init__(cfg, env_cfg, device)
+
+    def make_policy(self) -> CBCTPPolicy:
+        return CBCTPPolicy(self.actor, self.tp)
+
+    def extra_fields(self) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+        """TP Net's predictions at s and s', inputs of the actor and the critic."""
+        k = self.lc.horizon
+        return {"pred": ((k, 2), torch.float32), "next_pred": ((k, 2), torch.float32)}
+
     @torch.no_grad()
-    def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
-        """(E, N, 2) actions of the current actor plus OU noise (none in the ``greedy_envs``
-        share of the environments), clipped to [-1, 1], and no evader actions (the
-        environment's evader plays)."""
-        actions = self.policy.act(obs, info)  # also TP Net's prediction, stored by record()
-        if self.demonstrating():  # the demonstrator plays as it would, without noise
-            return self.demo(obs, info).clamp(-1.0, 1.0), None
-        if noise_scale > 0:
-            actions = actions + self.noise.sample(gen, noise_scale) * self.explore
-        return actions.clamp(-1.0, 1.0), None
+    def extra_record(self, after: dict[str, Tensor]) -> dict[str, Tensor]:
+        return {"pred": self.policy.last_prediction, "next_pred": self.tp(after["final_history"])}
 
-    def record(
-        self,
-        before: dict[str, Tensor],
-        actions: Tensor,
-        evader_actions: Tensor | None,
-        reward: Tensor,
-        terminated: Tensor,
-        after: dict[str, Tensor],
-    ) -> None:
-        """Store one vector step: ``before``/``after`` are the infos around ``env.step``."""
-        preds = {}
-        if self.tp is not None:
-            with torch.no_grad():
-                preds = {
-                    "pred": self.policy.last_prediction,
-                    "next_pred": self.tp(after["final_history"]),
-                }
-        if self.demo is not None:
-            preds["demo"] = torch.full_like(terminated, self.demonstrating())
-        self.buffer.add(**transition(before, actions, reward, terminated, after), **preds)
+    def predictions(self, w: TDWindows) -> tuple[Tensor | None, Tensor | None]:
+        return self.buffer.get("pred", w.row, w.env), self.buffer.get("next_pred", w.last, w.env)
 
-    def demonstrating(self) -> bool:
-        """Whether the demonstration policy plays the next step (``demo_transitions``)."""
-        # The buffer's capacity is whole steps of all environments: it may fall a few
-        # transitions short of buffer_size, and so of demo_transitions.
-        wanted = min(self.cfg.demo_transitions, self.buffer.capacity)
-        return self.demo is not None and len(self.buffer) < wanted
+    def observe(
+        self, state: Tensor, alive: Tensor, pred: Tensor | None
+    ) -> tuple[Tensor, Tensor, Tensor | None]:
+        obs, mask = pursuer_obs(state, alive)
+        return obs, mask, relative_prediction(pred, state, self.n)
 
-    def episode_reset(self, done: Tensor) -> None:
-        self.noise.reset(done)
-        if self.demo is not None:
-            self.demo.reset(done)
-
-    # --- learning --------------------------------------------------------------------------------
     def ready(self) -> bool:
         """Whether updates may start: TP Net as soon as a full window is stored."""
-        wanted = max(self.cfg.tp_batch_size, 1) if self.tp is not None else self.cfg.warmup
-        return len(self.buffer) >= max(wanted, self.cfg.batch_size) and (
-            self.buffer.filled > self.history + self.cfg.horizon + 1
+        lc = self.lc
+        return len(self.buffer) >= max(lc.tp_batch_size, lc.batch_size) and (
+            self.buffer.filled > self.history + lc.horizon + 1
         )
 
-    def sample_windows(self, gen: torch.Generator) -> TDWindows:
-        """``batch_size`` sampled transitions, each with the n-step window (``n_step``) its
-        TD target sums and bootstraps from (:meth:`ReplayBuffer.n_step`)."""
-        cfg, buf = self.cfg, self.buffer
-        row, env = buf.sample_index(cfg.batch_size, gen, future=cfg.n_step - 1)
-        ret, last, length = buf.n_step(row, env, cfg.n_step, cfg.gamma)
-        return TDWindows(
-            row=row,
-            env=env,
-            last=last,
-            state=buf.get("state", row, env),
-            alive=buf.get("alive", row, env),
-            action=buf.get("action", row, env),
-            ret=ret,
-            before_last=(cfg.gamma ** (length - 1).to(ret.dtype)).unsqueeze(-1),
-            next_state=buf.get("next_state", last, env),
-            next_alive=buf.get("next_alive", last, env),
-            terminated=buf.get("terminated", last, env),
-        )
-
-    def update(self, gen: torch.Generator) -> dict[str, float]:
-        """One gradient update of TP Net (every ``tp_update_every`` calls), then (after the
-        warm-up) the critic and the actor; returns their metrics."""
-        cfg, buf, n = self.cfg, self.buffer, self.n
-        stats: dict[str, float] = {}
-        if self.tp is not None and self.updates % cfg.tp_update_every == 0:
-            stats.update(self.update_tp(gen))
-        self.updates += 1
-        if len(buf) < cfg.warmup:
-            return stats
-
-        w = self.sample_windows(gen)
-        row, env, last = w.row, w.env, w.last
-        state, alive, action = w.state, w.alive, w.action
-        next_state, next_alive, terminated = w.next_state, w.next_alive, w.terminated
-        pred = next_pred = None
-        if self.tp is not None:
-            pred, next_pred = buf.get("pred", row, env), buf.get("next_pred", last, env)
-        with torch.no_grad():
-            next_obs, next_mask = pursuer_obs(next_state, next_alive)
-            rel = None if next_pred is None else relative_prediction(next_pred, next_state, n)
-            next_action = self.actor_target(next_obs, next_mask, rel)
-            q_next = self.critic_target(next_state, next_alive, next_action, next_pred)
-            keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
-            y = w.ret + cfg.gamma * w.before_last * keep * q_next
-            if cfg.charge_exits:  # exits happen only at a window's last transition
-                y = y + w.before_last * exit_charge(
-                    buf.get("reward", last, env),
-                    alive,
-                    next_alive,
-                    terminated,
-                    cfg.gamma,
-                    self.capture_count,
-                    self.crash_reward,
-                )
-        q = self.critic(state, alive, action, pred)
-        critic_loss = masked_mean((q - y) ** 2, alive)
-        stats["critic_grad"] = optimise(
-            self.opt_critic, critic_loss, self.critic.parameters(), cfg.grad_clip
-        )
-        if self.critic_warming():
-            return self.finish_update(None, critic_loss, q, alive, stats)
-
-        # Actor (eq. 4). "one": in each sample one alive pursuer acts with the current actor and
-        # the others keep their stored actions (MADDPG's per-agent gradient); "all": every alive
-        # pursuer acts with it at once and the actor ascends the mean of their Qs (a centralised
-        # policy gradient, as FACMAC's), N times the gradient samples for one critic pass.
-        obs, mask = pursuer_obs(state, alive)
-        rel = None if pred is None else relative_prediction(pred, state, n)
-        if self.demonstrating() and cfg.bc_weight > 0:
-            # While the demonstrator still plays, the critic is too young to follow: the actor
-            # learns by behaviour cloning alone, every alive pursuer of every sample.
-            pre = self.actor.pre_activation(obs, mask, rel)
-            bc = masked_mean(((torch.tanh(pre) - action) ** 2).sum(-1), alive)
-            reg = masked_mean((pre**2).sum(-1), alive)
-            stats["bc_share"] = 1.0
-            return self.finish_update(
-                cfg.bc_weight * bc + cfg.action_reg * reg, critic_loss, q, alive, stats
-            )
-        if cfg.actor_gradient == "all":
-            pre = self.actor.pre_activation(obs, mask, rel)  # (B, N, 2)
-            new_action = torch.where(alive.unsqueeze(-1), torch.tanh(pre), action)
-            acting = alive
-            if self.anchor is not None:
-                with torch.no_grad():
-                    anchored = torch.tanh(self.anchor.pre_activation(obs, mask, rel))
-                moved = ((torch.tanh(pre) - anchored) ** 2).sum(-1)  # (B, N)
-        else:
-            # the sampler's generator lives on the CPU (one RNG stream whatever the device)
-            weights = alive.float().cpu() + 1e-6
-            pick = torch.multinomial(weights, 1, generator=gen).squeeze(1).to(state.device)
-            b = torch.arange(len(row), device=state.device)
-            rel = None if rel is None else rel[b, pick]
-            pre = self.actor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
-            if self.anchor is not None:
-                with torch.no_grad():
-                    anchored = torch.tanh(
-                        self.anchor.pre_activation_one(obs[b, pick], mask[b, pick], rel, pick)
-                    )
-                moved = ((torch.tanh(pre) - anchored) ** 2).sum(-1).unsqueeze(1)  # (B, 1)
-            chosen = torch.nn.functional.one_hot(pick, n).bool() & alive
-            new_action = torch.where(chosen.unsqueeze(-1), torch.tanh(pre).unsqueeze(1), action)
-            pre = pre.unsqueeze(1) * chosen.unsqueeze(-1)
-            acting = chosen
-        for p in self.critic.parameters():
-            p.requires_grad_(False)
-        q_pi = self.critic(state, alive, new_action, pred)
-        for p in self.critic.parameters():
-            p.requires_grad_(True)
-        # MADDPG's regulariser: the squared pre-activation, so that the tanh never saturates
-        # (a penalty on the action itself vanishes there).
-        reg = masked_mean((pre**2).sum(-1), acting)
-        q_term, bc_term = masked_mean(q_pi, acting), 0.0
-        if self.anchor is not None:
-            # As TD3+BC's, with the starting actor's actions as the demonstrations: the Q term
-            # over the batch's mean |Q|, plus the squared distance to the anchor's action.
-            q_term = q_term / masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
-            anchor_term = masked_mean(moved.expand_as(acting), acting)
-            bc_term = cfg.anchor_weight * anchor_term
-            stats["anchor_distance"] = float(anchor_term.detach())
-        elif self.demo is not None and cfg.bc_weight > 0:
-            # TD3+BC (Fujimoto & Gu 2021): the Q term divided by the batch's mean |Q|, so that
-            # bc_weight weighs the same whatever the reward's scale, plus behaviour cloning on
-            # the demonstrations (the other pursuers' actions are the stored ones, so they add
-            # nothing).
-            q_term = q_term / masked_mean(q_pi.detach().abs(), acting).clamp(min=1e-6)
-            demo = buf.get("demo", row, env).unsqueeze(-1) & acting
-            bc = ((new_action - action) ** 2).sum(-1)
-            bc_term = cfg.bc_weight * (bc * demo).sum() / len(row)
-            stats["bc_share"] = float(demo.sum()) / max(float(acting.sum()), 1.0)
-        actor_loss = -q_term + cfg.action_reg * reg + bc_term
-        return self.finish_update(actor_loss, critic_loss, q, alive, stats)
-
-    def critic_warming(self) -> bool:
-        """Whether this update is one of the first ``critic_warmup``: the critic learns alone
-        (call after counting the update in ``self.updates``)."""
-        return self.updates <= self.cfg.critic_warmup
-
-    def finish_update(
-        self, actor_loss: Tensor | None, critic_loss: Tensor, q: Tensor, alive: Tensor, stats: dict
-    ) -> dict[str, float]:
-        """The end of every actor-critic update (CBC-TP and its MADDPG / DDPG / BiCNet
-        relatives): the actor's step (none with ``actor_loss=None``, the critic's warm-up), the
-        soft target updates, the losses and the mean Q of the alive pursuers (q, alive: (B, N))
-        added to ``stats``, which is returned."""
-        cfg = self.cfg
-        if actor_loss is not None:
-            optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
-            soft_update(self.actor_target, self.actor, cfg.tau)
-            stats["actor_loss"] = float(actor_loss.detach())
-        soft_update(self.critic_target, self.critic, cfg.tau)
-        stats.update(
-            critic_loss=float(critic_loss.detach()), q_mean=float(masked_mean(q.detach(), alive))
-        )
-        return stats
-
-    def update_tp(self, gen: torch.Generator) -> dict[str, float]:
-        """One supervised TP Net step (eq. 7) on J windows; FDE/ADE in arena units."""
-        cfg, buf, k = self.cfg, self.buffer, self.cfg.horizon
-        row, env = buf.sample_index(cfg.tp_batch_size, gen, past=self.history - 1, future=k)
+    def auxiliary_update(self, gen: torch.Generator) -> dict[str, float]:
+        """One supervised TP Net step (eq. 7) on J windows, every ``tp_update_every`` updates;
+        FDE/ADE in arena units."""
+        if self.updates % self.lc.tp_update_every:
+            return {}
+        lc, buf, k = self.lc, self.buffer, self.lc.horizon
+        row, env = buf.sample_index(lc.tp_batch_size, gen, past=self.history - 1, future=k)
         valid = buf.same_episode_ahead(row, env, k)
         hist = frames(buf.window("state", row, env, self.history))
         target = torch.stack(
@@ -480,49 +445,25 @@ class CBCTP:
         pred = self.tp(hist)
         err = ((pred - target) ** 2).sum(-1)  # (B, k) squared distance
         loss = masked_mean(err.mean(-1), valid)
-        optimise(self.opt_tp, loss, self.tp.parameters(), self.cfg.grad_clip)
+        optimise(self.opt_tp, loss, self.tp.parameters(), lc.grad_clip)
         with torch.no_grad():
             dist = err.sqrt()
             fde = masked_mean(dist[:, -1], valid)
             ade = masked_mean(dist.mean(-1), valid)
         return {"tp_loss": float(loss.detach()), "tp_fde": float(fde), "tp_ade": float(ade)}
 
-    @staticmethod
-    def score(success_rate: float, episode_steps: float) -> float:
-        """Training score of a log row (higher is better): success, then speed."""
-        return success_rate - 1e-5 * episode_steps
-
-    # --- saving ----------------------------------------------------------------------------------
     def modules(self) -> dict[str, nn.Module]:
-        out = {
-            "actor": self.actor,
-            "critic": self.critic,
-            "actor_target": self.actor_target,
-            "critic_target": self.critic_target,
-        }
-        if self.tp is not None:
-            out["tp"] = self.tp
-        if self.anchor is not None:
-            out["anchor"] = self.anchor
-        return out
+        return super().modules() | {"tp": self.tp}
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
-        out = {"actor": self.opt_actor, "critic": self.opt_critic}
-        if self.opt_tp is not None:
-            out["tp"] = self.opt_tp
-        return out
+        return super().optimizers() | {"tp": self.opt_tp}
 
     def policy_modules(self) -> dict[str, nn.Module]:
-        """What a deployed policy needs (shipped models hold only these)."""
-        out = {"actor": self.actor}
-        if self.tp is not None:
-            out["tp"] = self.tp
-        return out
+        return {"actor": self.actor, "tp": self.tp}
 
     @classmethod
     def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device) -> tuple[CBCTPPolicy, dict]:
-        """An untrained policy of this architecture, and its modules by name (to load into)."""
-        actor = cls.make_actor(cfg, env_cfg.num_pursuers).to(device)
-        tp = TPNet(cfg.tp_hidden, cfg.tp_layers, cfg.horizon).to(device) if cfg.use_tp else None
-        modules = {"actor": actor} | ({"tp": tp} if tp is not None else {})
-        return CBCTPPolicy(actor, tp), modules
+        lc = cfg.learner
+        actor = cls.make_actor(lc, env_cfg.num_pursuers).to(device)
+        tp = TPNet(lc.tp_hidden, lc.tp_layers, lc.horizon).to(device)
+        return CBCTPPolicy(actor, tp), {"actor": actor, "tp": tp}

@@ -1,8 +1,9 @@
 """DDPG (Lillicrap et al., 2016) as independent learners: each pursuer has its own actor and its
 own critic, and both see only that pursuer's observation (and its critic only its own action).
 
-It is :class:`pes.algos.maddpg.MADDPG` with decentralised critics: the same MLP actors, replay
-storage, update and target networks; critic i reads pursuer i's Table I observation (N rows of
+It is :class:`pes.algos.maddpg.MADDPG` with decentralised critics (a variant of that baseline,
+so a subclass): the same settings, presets, MLP actors, replay storage, update and target
+networks; critic i reads pursuer i's Table I observation (N rows of
 8, scaled, with their real-row flags) and its action instead of the global state and every
 action. The other pursuers are part of each learner's environment, so its Q is non-stationary
 while they learn -- the weakness MADDPG's centralised critics address.
@@ -17,21 +18,20 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from pes.algos.config import TrainConfig
-from pes.algos.features import pursuer_obs
-from pes.algos.maddpg import MADDPG, EnsembleMLP, observation_input
-from pes.algos.nets import RowScaled
+from pes.algos.maddpg import MADDPG, MADDPGConfig
+from pes.learn.features import pursuer_obs
+from pes.learn.nets import EnsembleMLP, RowScaled, observation_input
 
 
 class LocalCritics(RowScaled):
     """Critic i: pursuer i's observation (9N numbers, as :class:`pes.algos.maddpg.MLPActors`)
     and its own action (2) -> MLP (two hidden layers of ``mlp_hidden``) -> Q_i."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
-        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
+    def __init__(self, lc: MADDPGConfig, num_pursuers: int) -> None:
+        super().__init__(0, lc.obstacle_scale, lc.target_scale)
         self.n = num_pursuers
-        members = 1 if cfg.shared else num_pursuers
-        h = cfg.mlp_hidden
+        members = 1 if lc.shared else num_pursuers
+        h = lc.mlp_hidden
         self.body = EnsembleMLP(members, [9 * num_pursuers + 2, h, h, 1])
 
     def each(self, state: Tensor, alive: Tensor, actions: Tensor) -> Tensor:
@@ -56,5 +56,5 @@ class DDPG(MADDPG):
     name = "ddpg"
 
     @staticmethod
-    def make_critic(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        return LocalCritics(cfg, num_pursuers)
+    def make_critic(lc: MADDPGConfig, num_pursuers: int) -> nn.Module:
+        return LocalCritics(lc, num_pursuers)

@@ -3,43 +3,168 @@ then frozen and used as the default opponent of evaluations.
 
 A single DDPG agent (Lillicrap et al.) controls the evader through ``evader_policy="external"``.
 It sees ``info["evader_obs"]`` (its own row and one row per pursuer, Table I style) through a
-permutation-invariant encoder (:class:`pes.algos.nets.DeepSetActor`), so the frozen evader
+permutation-invariant encoder (:class:`DeepSetActor`), so the frozen evader
 plays against any number of pursuers, and earns the environment's evader reward
-(docs/scenario.md). Its opponents during training are ``cfg.opponent`` pursuers (PID(PF) by
+(docs/scenario.md). Its opponents during training are ``opponent`` pursuers (PID(PF) by
 default).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import torch
 from torch import Tensor, nn
 
-from pes.algos.buffer import ReplayBuffer
-from pes.algos.common import optimise, soft_update, target_copy
-from pes.algos.config import TrainConfig
-from pes.algos.nets import DeepSetActor, DeepSetCritic
-from pes.algos.noise import OUNoise
+from pes.errors import ConfigError
+from pes.learn.buffer import ReplayBuffer
+from pes.learn.common import optimise, soft_update, target_copy
+from pes.learn.config import LearnerConfig, TrainConfig
+from pes.learn.learner import Learner
+from pes.learn.nets import mlp
+from pes.learn.noise import OUNoise
+from pes.learn.presets import TINY_PROTOCOL, TINY_RUN
 from pes.policies import SCRIPTED
 from pes.sim.config import EnvConfig
 
 
-class EvaderDDPG:
+@dataclass
+class EvaderDDPGConfig(LearnerConfig):
+    """The DDPG evader's settings (the paper's, §V-A, with 128 units)."""
+
+    gamma: float = 0.95
+    """Discount factor."""
+    lr_actor: float = 1e-3
+    """Adam learning rate of the actor."""
+    lr_critic: float = 1e-3
+    """Adam learning rate of the critic."""
+    tau: float = 1e-2
+    """Soft target update rate."""
+    buffer_size: int = 1_000_000
+    """Transitions kept in the replay buffer."""
+    batch_size: int = 512
+    """Minibatch of the updates."""
+    update_every: int = 50
+    """Collected transitions per update."""
+    warmup: int = 5000
+    """Transitions collected before the first update."""
+    grad_clip: float = 1.0
+    """Gradient norm clip (0 = none)."""
+    action_reg: float = 1e-3
+    """Weight of the squared action in the actor loss."""
+    hidden: int = 128
+    """Units of the actor's and the critic's layers."""
+    opponent: str = "pid-pf"
+    """Pursuers the evader trains against (``pid-pf`` or ``random``)."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (
+        "lr_actor",
+        "lr_critic",
+        "buffer_size",
+        "batch_size",
+        "update_every",
+        "hidden",
+    )
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("warmup", "grad_clip", "action_reg")
+
+    def check(self) -> None:
+        if self.opponent not in ("pid-pf", "random"):
+            raise ConfigError(f"opponent must be pid-pf or random, got '{self.opponent}'")
+
+
+EVADER_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(episodes=4000, num_envs=1),
+    # Settings of the shipped evader (src/pes/models/evader_ddpg.md): with the paper's gamma
+    # 0.95 and lr 5e-4 the evader's policy collapsed onto the arena wall (see
+    # docs/algorithms/evader_ddpg.md); its noise falls from 0.3 to 0.1 over 720 episodes.
+    "quick": dict(
+        episodes=1200,
+        num_envs=32,
+        gamma=0.99,
+        lr_actor=1e-4,
+        lr_critic=5e-4,
+        action_reg=0.01,
+        buffer_size=300_000,
+        batch_size=256,
+        update_every=16,
+        warmup=10_000,
+        time_limit=15.0,
+        log_every=50,
+        protocol=dict(noise=dict(sigma=0.3, sigma_final=0.1, decay_episodes=720)),
+    ),
+    "tiny": dict(
+        TINY_RUN,
+        hidden=32,
+        buffer_size=20_000,
+        batch_size=64,
+        update_every=8,
+        warmup=500,
+        protocol=TINY_PROTOCOL,
+    ),
+}
+"""The evader's presets; it trains under the ``paper`` protocol by default."""
+
+
+class DeepSetActor(nn.Module):
+    """The DDPG evader's actor: its own row, plus the max and mean of an embedding of each alive
+    pursuer's row (so it plays against any number of pursuers), through an MLP to its action.
+
+    Input: ``info["evader_obs"]`` (B, A, 8) as built by :func:`pes.sim.scenario.observe`."""
+
+    def __init__(self, hidden: int = 128, action_dim: int = 0) -> None:
+        super().__init__()
+        self.embed = mlp([8, hidden, hidden], nn.ReLU())
+        self.head = mlp([8 + action_dim + 2 * hidden, hidden, hidden, 1 if action_dim else 2])
+        self.squash = nn.Identity() if action_dim else nn.Tanh()
+
+    def features(self, obs: Tensor) -> Tensor:
+        others = obs[:, 1:]
+        present = (others.abs().sum(-1) > 0).unsqueeze(-1)
+        emb = self.embed(others)
+        w = present.to(obs.dtype)
+        mean = (emb * w).sum(1) / w.sum(1).clamp(min=1.0)
+        top = emb.masked_fill(~present, 0.0).amax(1)  # embeddings are >= 0 (ReLU)
+        return torch.cat([mean, top], dim=-1)
+
+    def forward(self, obs: Tensor, action: Tensor | None = None) -> Tensor:
+        """obs (B, A, 8) -> action (B, 2) in [-1, 1]; with ``action`` (critic) -> Q (B,)."""
+        parts = [obs[:, 0]] + ([action] if action is not None else []) + [self.features(obs)]
+        out = self.squash(self.head(torch.cat(parts, dim=-1)))
+        return out.squeeze(-1) if action is not None else out
+
+
+class DeepSetCritic(DeepSetActor):
+    """The DDPG evader's critic: :class:`DeepSetActor`'s body with the action beside its own
+    row, giving Q (B,)."""
+
+    def __init__(self, hidden: int = 128) -> None:
+        super().__init__(hidden, action_dim=2)
+
+
+class EvaderDDPG(Learner):
     """The DDPG evader learner."""
 
     name = "evader-ddpg"
+    Config = EvaderDDPGConfig
+    PRESETS = EVADER_PRESETS
+    pursuer = False
+    default_protocol = "paper"
+    AIDS: ClassVar[dict[str, str]] = {"noise": ""}
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
-        self.cfg = cfg
+        super().__init__(cfg, env_cfg, device)
+        self.lc = lc = cfg.learner
         a = env_cfg.num_pursuers + 1
-        self.actor = DeepSetActor(cfg.hidden).to(device)
-        self.critic = DeepSetCritic(cfg.hidden).to(device)
+        self.actor = DeepSetActor(lc.hidden).to(device)
+        self.critic = DeepSetCritic(lc.hidden).to(device)
         self.actor_target = target_copy(self.actor)
         self.critic_target = target_copy(self.critic)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
-        self.pursuers = SCRIPTED[cfg.opponent](env_cfg)
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=lc.lr_actor)
+        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=lc.lr_critic)
+        self.pursuers = SCRIPTED[lc.opponent](env_cfg)
         self.buffer = ReplayBuffer(
-            cfg.buffer_size,
+            lc.buffer_size,
             cfg.num_envs,
             {
                 "obs": ((a, 8), torch.float32),
@@ -50,7 +175,7 @@ class EvaderDDPG:
             },
             device,
         )
-        self.noise = OUNoise((cfg.num_envs, 2), cfg.noise_theta, 1.0, device=device)
+        self.noise = OUNoise((cfg.num_envs, 2), cfg.protocol.noise.theta, 1.0, device=device)
 
     @staticmethod
     def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
@@ -80,10 +205,13 @@ class EvaderDDPG:
         self.pursuers.reset(done)
 
     def ready(self) -> bool:
-        return len(self.buffer) >= max(self.cfg.warmup, self.cfg.batch_size)
+        return len(self.buffer) >= max(self.lc.warmup, self.lc.batch_size)
+
+    def update_credit(self) -> float:
+        return self.cfg.num_envs / self.lc.update_every
 
     def update(self, gen: torch.Generator) -> dict[str, float]:
-        cfg, buf = self.cfg, self.buffer
+        cfg, buf = self.lc, self.buffer
         row, env = buf.sample_index(cfg.batch_size, gen)
         obs, action = buf.get("obs", row, env), buf.get("action", row, env)
         reward, next_obs = buf.get("reward", row, env), buf.get("next_obs", row, env)
@@ -104,6 +232,7 @@ class EvaderDDPG:
         optimise(self.opt_actor, actor_loss, self.actor.parameters(), cfg.grad_clip)
         soft_update(self.actor_target, self.actor, cfg.tau)
         soft_update(self.critic_target, self.critic, cfg.tau)
+        self.updates += 1
         return {
             "critic_loss": float(critic_loss.detach()),
             "actor_loss": float(actor_loss.detach()),
@@ -129,3 +258,15 @@ class EvaderDDPG:
 
     def policy_modules(self) -> dict[str, nn.Module]:
         return {"actor": self.actor}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"noise": self.noise.state_dict()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.noise.load_state_dict(state["noise"])
+
+    @classmethod
+    def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device):
+        """What plays against a trained evader in its evaluation: its opponent pursuers (the
+        evader itself is the environment's, ``evader_model``)."""
+        return SCRIPTED[cfg.learner.opponent](env_cfg), {}

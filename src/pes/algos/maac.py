@@ -31,25 +31,129 @@ with no other alive pursuer attends to nothing: x_i = 0), and out of every loss.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import torch
 from torch import Tensor, nn
 
-from pes.algos.buffer import ReplayBuffer, transition, transition_fields
-from pes.algos.common import (
+from pes.errors import ConfigError
+from pes.learn.buffer import ReplayBuffer, transition, transition_fields
+from pes.learn.common import (
     ActorPolicy,
-    StochasticActorLearner,
     gaussian_log_prob,
     masked_mean,
     optimise,
-    pursuer_score,
     soft_update,
     target_copy,
 )
-from pes.algos.config import TrainConfig
-from pes.algos.features import pursuer_obs
-from pes.algos.nets import FlatObsMLP, PerAgent, RowScaled, mlp
+from pes.learn.config import LearnerConfig, TrainConfig
+from pes.learn.features import pursuer_obs
+from pes.learn.learner import Learner
+from pes.learn.nets import FlatObsMLP, PerAgent, RowScaled, mlp
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.td import sample_windows, td_target
+from pes.policies import SCRIPTED
 from pes.sim.config import EnvConfig
+
+
+@dataclass
+class MAACConfig(LearnerConfig):
+    """MAAC's settings: the paper's (§V-A) where they apply, MAAC's own 128 units and 4 heads."""
+
+    gamma: float = 0.95
+    """Discount factor."""
+    lr_actor: float = 1e-3
+    """Adam learning rate of the actors."""
+    lr_critic: float = 1e-3
+    """Adam learning rate of the two attention critics."""
+    tau: float = 1e-2
+    """Soft target update rate."""
+    buffer_size: int = 1_000_000
+    """Transitions kept in the replay buffer."""
+    batch_size: int = 512
+    """Minibatch of the updates."""
+    update_every: int = 50
+    """Collected transitions per update."""
+    warmup: int = 5000
+    """Transitions collected before the first update."""
+    grad_clip: float = 1.0
+    """Gradient norm clip (0 = none)."""
+    hidden: int = 128
+    """Units of the actors' hidden layers and of the critics' encoders and attention."""
+    shared: bool = True
+    """One actor and one set of critic encoders and heads for all pursuers."""
+    obstacle_scale: float = 20.0
+    """Factor on the obstacle-vector columns of the observation rows (``RowScaled``)."""
+    target_scale: float = 5.0
+    """Factor on the vector to the evader in the observation rows."""
+    attention_heads: int = 4
+    """Attention heads of the critic (``hidden`` must be a multiple)."""
+    alpha: float = 0.05
+    """Initial entropy temperature (SAC's 0.2 explored too long in the learning test)."""
+    auto_alpha: bool = True
+    """Tune the temperature towards ``target_entropy`` (SAC v2); False keeps ``alpha``."""
+    target_entropy: float = -2.0
+    """Target entropy per pursuer (nats; -2 = minus the action dimension)."""
+    lr_alpha: float = 1e-3
+    """Adam learning rate of the temperature."""
+    attend_reg: float = 1e-3
+    """Weight of the squared attention logits in the critic loss (as the original)."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (
+        "lr_actor",
+        "lr_critic",
+        "buffer_size",
+        "batch_size",
+        "update_every",
+        "hidden",
+        "attention_heads",
+    )
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = (
+        "warmup",
+        "grad_clip",
+        "obstacle_scale",
+        "target_scale",
+        "alpha",
+        "lr_alpha",
+        "attend_reg",
+    )
+
+    def check(self) -> None:
+        if self.hidden % self.attention_heads:
+            raise ConfigError(
+                f"maac: hidden ({self.hidden}) must be a multiple of attention_heads "
+                f"({self.attention_heads})"
+            )
+
+
+MAAC_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
+    # One update per 64 transitions (two vector steps of 32 environments): an update of the
+    # two attention critics, the actors and alpha costs ~70 ms on one CPU thread.
+    "quick": dict(
+        QUICK_RUN,
+        episodes=1800,
+        hidden=64,
+        lr_actor=5e-4,
+        lr_critic=1e-3,
+        buffer_size=300_000,
+        batch_size=256,
+        update_every=64,
+        warmup=10_000,
+    ),
+    "tiny": dict(
+        TINY_RUN,
+        hidden=32,
+        attention_heads=2,
+        buffer_size=20_000,
+        batch_size=64,
+        update_every=8,
+        warmup=500,
+        protocol=TINY_PROTOCOL,
+    ),
+}
+
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 """Range of the actors' log standard deviation (pre-tanh)."""
@@ -59,13 +163,13 @@ class SquashedGaussianActor(nn.Module):
     """The pursuers' policies: a = tanh(u), u ~ N(mean(o_i), std(o_i)), mean and log std from a
     :class:`FlatObsMLP` on pursuer i's observation (one shared, or one per pursuer)."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+    def __init__(self, lc: MAACConfig, num_pursuers: int) -> None:
         super().__init__()
         n = num_pursuers
         self.nets = PerAgent(
-            lambda: FlatObsMLP(n, cfg.hidden, 4, 2, cfg.obstacle_scale, cfg.target_scale),
+            lambda: FlatObsMLP(n, lc.hidden, 4, 2, lc.obstacle_scale, lc.target_scale),
             n,
-            cfg.shared,
+            lc.shared,
         )
 
     def forward(self, obs: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
@@ -92,21 +196,21 @@ class AttentionCritic(RowScaled):
 
     Rows are scaled as the CBC networks' (:class:`RowScaled`)."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
-        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
-        h, n = cfg.hidden, num_pursuers
-        self.heads = cfg.attention_heads
+    def __init__(self, lc: MAACConfig, num_pursuers: int) -> None:
+        super().__init__(0, lc.obstacle_scale, lc.target_scale)
+        h, n = lc.hidden, num_pursuers
+        self.heads = lc.attention_heads
         row = 8 + 6 + 1  # own state row, the evader's, alive flag
 
         def encoder(inputs: int):
             return lambda: nn.Sequential(nn.Linear(inputs, h), nn.LeakyReLU())
 
-        self.state_encoder = PerAgent(encoder(row), n, cfg.shared)
-        self.state_action_encoder = PerAgent(encoder(row + 2), n, cfg.shared)
+        self.state_encoder = PerAgent(encoder(row), n, lc.shared)
+        self.state_action_encoder = PerAgent(encoder(row + 2), n, lc.shared)
         self.query = nn.Linear(h, h, bias=False)
         self.key = nn.Linear(h, h, bias=False)
         self.value = nn.Sequential(nn.Linear(h, h), nn.LeakyReLU())
-        self.head = PerAgent(lambda: mlp([2 * h + 2, h, 1]), n, cfg.shared)
+        self.head = PerAgent(lambda: mlp([2 * h + 2, h, 1]), n, lc.shared)
 
     def forward(
         self, state: Tensor, alive: Tensor, actions: Tensor, own_actions: Tensor | None = None
@@ -159,59 +263,100 @@ class Temperature(nn.Module):
         return self.log_alpha.exp()
 
 
-class MAAC(StochasticActorLearner):
+class MAAC(Learner):
     """The MAAC learner (soft actor-critic with attention critics)."""
 
     name = "maac"
-    Actor = SquashedGaussianActor
+    Config = MAACConfig
+    PRESETS = MAAC_PRESETS
+    AIDS: ClassVar[dict[str, str]] = {
+        "noise": "not applied: MAAC explores by sampling its stochastic policy, at the entropy "
+        "its temperature keeps (alpha, target_entropy)",
+        "n_step": "",
+        "greedy_envs": "",
+        "demonstrations": "",
+        "charge_exits": "",
+    }
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
-        self.cfg = cfg
+        super().__init__(cfg, env_cfg, device)
+        self.lc = lc = cfg.learner
+        protocol = cfg.protocol
         self.n = n = env_cfg.num_pursuers
-        self.device = device
-        self.actor = self.Actor(cfg, n).to(device)
-        self.critics = nn.ModuleList(AttentionCritic(cfg, n) for _ in range(2)).to(device)
+        self.n_step = protocol.n_step
+        crash = protocol.crash_curriculum
+        self.exits = (
+            (env_cfg.capture_count, env_cfg.crash_reward)
+            if crash is not None and crash.charge_exits
+            else None
+        )
+        self.actor = SquashedGaussianActor(lc, n).to(device)
+        self.critics = nn.ModuleList(AttentionCritic(lc, n) for _ in range(2)).to(device)
         self.critics_target = target_copy(self.critics)
-        self.temperature = Temperature(cfg.alpha).to(device)
+        self.temperature = Temperature(lc.alpha).to(device)
         self.policy = ActorPolicy(self.actor)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=cfg.lr_critic)
-        self.opt_alpha = torch.optim.Adam(self.temperature.parameters(), lr=cfg.lr_alpha)
-        self.buffer = ReplayBuffer(cfg.buffer_size, cfg.num_envs, transition_fields(n), device)
-        self.noise = None  # exploration is the policy's own sampling
-        self.updates = 0
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=lc.lr_actor)
+        self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=lc.lr_critic)
+        self.opt_alpha = torch.optim.Adam(self.temperature.parameters(), lr=lc.lr_alpha)
+        fields = transition_fields(n)
+        demos = protocol.demonstrations
+        self.demo, self.demo_transitions = None, 0
+        if demos is not None and demos.transitions > 0:
+            # the demonstrator's transitions fill the replay buffer; MAAC does not clone them
+            self.demo = SCRIPTED[demos.policy](env_cfg)
+            self.demo_transitions = demos.transitions
+        self.buffer = ReplayBuffer(lc.buffer_size, cfg.num_envs, fields, device)
+        # (E, 1, 1) True for the environments that explore, False for the greedy_envs share
+        greedy = round(protocol.greedy_envs * cfg.num_envs)
+        explore = torch.arange(cfg.num_envs, device=device) < cfg.num_envs - greedy
+        self.explore = explore[:, None, None]
 
     @staticmethod
-    def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
-        """The training scenario (unchanged: the configured evader plays)."""
-        return env_cfg
+    def fixed_swarm(cfg: TrainConfig) -> str | None:
+        return "has MLPs whose inputs are sized"
+
+    @classmethod
+    def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device):
+        actor = SquashedGaussianActor(cfg.learner, env_cfg.num_pursuers).to(device)
+        return ActorPolicy(actor), {"actor": actor}
 
     # --- acting ----------------------------------------------------------------------------------
     @torch.no_grad()
     def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
-        """(E, N, 2) actions sampled from the policies (``noise_scale`` is unused: SAC explores
-        by sampling), and no evader actions."""
-        return self.actor.sample(obs, info["obs_mask"], gen)[0], None
+        """(E, N, 2) actions sampled from the policies (the mean in the ``greedy_envs`` share of
+        the environments), or the demonstrator's while it plays; no evader actions."""
+        sample = self.actor.sample(obs, info["obs_mask"], gen)[0]
+        if self.demonstrating():
+            return self.demo(obs, info).clamp(-1.0, 1.0), None
+        mean = self.actor.mean_action(obs, info["obs_mask"])
+        return torch.where(self.explore, sample, mean), None
 
     def record(self, before, actions, evader_actions, reward, terminated, after) -> None:
         """Store one vector step: ``before``/``after`` are the infos around ``env.step``."""
         self.buffer.add(**transition(before, actions, reward, terminated, after))
 
+    def demonstrating(self) -> bool:
+        """Whether the demonstrator plays the next step (the protocol's ``demonstrations``)."""
+        wanted = min(self.demo_transitions, self.buffer.capacity)
+        return self.demo is not None and len(self.buffer) < wanted
+
     def episode_reset(self, done: Tensor) -> None:
-        """Stateless between episodes."""
+        if self.demo is not None:
+            self.demo.reset(done)
 
     # --- learning --------------------------------------------------------------------------------
     def ready(self) -> bool:
-        return len(self.buffer) >= max(self.cfg.warmup, self.cfg.batch_size)
+        return len(self.buffer) >= max(self.lc.warmup, self.lc.batch_size)
+
+    def update_credit(self) -> float:
+        return self.cfg.num_envs / self.lc.update_every
 
     def update(self, gen: torch.Generator) -> dict[str, float]:
         """One update of the critics, the actors and the temperature; returns their metrics."""
-        cfg, buf = self.cfg, self.buffer
-        row, env = buf.sample_index(cfg.batch_size, gen)
-        state, alive = buf.get("state", row, env), buf.get("alive", row, env)
-        next_state, next_alive = buf.get("next_state", row, env), buf.get("next_alive", row, env)
-        action, reward = buf.get("action", row, env), buf.get("reward", row, env)
-        terminated = buf.get("terminated", row, env)
+        cfg = self.lc
+        w = sample_windows(self.buffer, cfg.batch_size, self.n_step, cfg.gamma, gen)
+        state, alive, action = w.state, w.alive, w.action
+        next_state, next_alive = w.next_state, w.next_alive
         alpha = self.temperature().detach()
 
         with torch.no_grad():
@@ -220,8 +365,9 @@ class MAAC(StochasticActorLearner):
             q_next = torch.min(
                 *(c(next_state, next_alive, next_action)[0] for c in self.critics_target)
             )
-            keep = (~terminated).unsqueeze(-1).float() * next_alive.float()
-            y = reward + cfg.gamma * keep * (q_next - alpha * next_logp)
+            # the soft value of the window's last next state (the entropy terms of the
+            # window's inner steps are left out, as n-step SAC commonly does)
+            y = td_target(w, q_next - alpha * next_logp, cfg.gamma, self.exits)
         critic_loss = torch.zeros((), device=state.device)
         for critic in self.critics:
             q, reg = critic(state, alive, action)
@@ -256,8 +402,6 @@ class MAAC(StochasticActorLearner):
             "alpha": float(alpha),
             "noise": float(masked_mean(std, alive)),
         }
-
-    score = staticmethod(pursuer_score)
 
     # --- saving ----------------------------------------------------------------------------------
     def modules(self) -> dict[str, nn.Module]:

@@ -1,9 +1,9 @@
 """MADDPG (Lowe et al., 2017): per-agent MLP actors, each on its own pursuer's observation, and
 per-agent centralised MLP critics on the global state and every pursuer's action.
 
-It trains on CBC-TP's machinery (:class:`pes.algos.cbc_tp.CBCTP`: acting with OU noise, the
-replay storage of global states, target networks, checkpoints) with other networks and its own
-update:
+It trains on the deterministic actor-critic of :mod:`pes.learn.actor_critic` (acting with OU
+noise, the replay storage of global states, TD targets, target networks, checkpoints) with its
+own networks and actor update:
 
 1. critic i: y_i = r_i + gamma * (1 - terminated) * Q'_i(s', mu'_1(o'_1), ..., mu'_N(o'_N)),
    squared error averaged over the pursuers alive in s;
@@ -25,68 +25,57 @@ the critics' inputs, and their Qs are left out of the losses.
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import torch
 from torch import Tensor, nn
 
-from pes.algos.cbc_tp import CBCTP
-from pes.algos.common import masked_mean, optimise
-from pes.algos.config import TrainConfig
-from pes.algos.features import pursuer_obs
-from pes.algos.nets import RowScaled
-from pes.errors import ConfigError
-from pes.sim.config import EnvConfig
+from pes.learn.actor_critic import ActorCritic, ActorCriticConfig
+from pes.learn.config import TrainConfig
+from pes.learn.nets import EnsembleMLP, RowScaled, observation_input
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.td import TDWindows
 
 
-class EnsembleLinear(nn.Module):
-    """``members`` independent linear layers applied at once: (K, B, in) -> (K, B, out),
-    each initialised as :class:`torch.nn.Linear`."""
+@dataclass
+class MADDPGConfig(ActorCriticConfig):
+    """MADDPG's settings (the paper gives none for its baselines: CBC-TP Net's, §V-A)."""
 
-    def __init__(self, members: int, fan_in: int, fan_out: int) -> None:
-        super().__init__()
-        bound = 1.0 / math.sqrt(fan_in)
-        self.weight = nn.Parameter(torch.empty(members, fan_in, fan_out).uniform_(-bound, bound))
-        self.bias = nn.Parameter(torch.empty(members, 1, fan_out).uniform_(-bound, bound))
+    mlp_hidden: int = 64
+    """Units of each of the two hidden layers of the actors' and the critics' MLPs."""
+    shared: bool = False
+    """One actor and one critic for all pursuers (the critic then also reads the pursuer's
+    one-hot index); False: one each, as MADDPG."""
 
-    def forward(self, x: Tensor) -> Tensor:
-        return torch.bmm(x, self.weight) + self.bias  # 2x faster than baddbmm's broadcast bias
-
-
-class EnsembleMLP(nn.Module):
-    """``members`` MLPs of the same ``sizes`` (ReLU between layers), one per agent or one shared
-    by all (``members == 1``). Input (N, B, in) -> (N, B, out); a single member is applied to
-    every agent's slice. The last layer starts within +-3e-3 when ``small_out`` (DDPG's init)."""
-
-    def __init__(self, members: int, sizes: list[int], small_out: bool = False) -> None:
-        super().__init__()
-        self.layers = nn.ModuleList(
-            EnsembleLinear(members, sizes[i], sizes[i + 1]) for i in range(len(sizes) - 1)
-        )
-        if small_out:
-            nn.init.uniform_(self.layers[-1].weight, -3e-3, 3e-3)
-            nn.init.uniform_(self.layers[-1].bias, -3e-3, 3e-3)
-
-    @property
-    def members(self) -> int:
-        return self.layers[0].weight.shape[0]
-
-    def forward(self, x: Tensor) -> Tensor:
-        k, b = x.shape[:2]
-        if self.members == 1:
-            x = x.reshape(1, k * b, -1)
-        for i, layer in enumerate(self.layers):
-            x = layer(x)
-            if i < len(self.layers) - 1:
-                x = torch.relu(x)
-        return x.reshape(k, b, -1)
+    POSITIVE: ClassVar[tuple[str, ...]] = (*ActorCriticConfig.POSITIVE, "mlp_hidden")
 
 
-def observation_input(obs: Tensor, mask: Tensor, scale: Tensor) -> Tensor:
-    """Each pursuer's flat MLP input: obs (B, N, N, 8) scaled by ``scale`` (8,) and its row
-    flags mask (B, N, N) -> (N, B, 9N), agent-major for :class:`EnsembleMLP`."""
-    rows = torch.cat([obs * scale, mask.unsqueeze(-1).to(obs.dtype)], dim=-1)
-    return rows.flatten(-2).transpose(0, 1)
+MADDPG_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
+    # CBC Net's quick learner with MLPs, twice as many updates (an MLP update is cheap)
+    "quick": dict(
+        QUICK_RUN,
+        episodes=3000,
+        mlp_hidden=64,
+        lr_actor=5e-4,
+        lr_critic=1e-3,
+        buffer_size=300_000,
+        batch_size=256,
+        update_every=16,
+        warmup=10_000,
+    ),
+    "tiny": dict(
+        TINY_RUN,
+        mlp_hidden=32,
+        buffer_size=20_000,
+        batch_size=64,
+        update_every=8,
+        warmup=500,
+        protocol=TINY_PROTOCOL,
+    ),
+}
+"""MADDPG's presets (DDPG's too)."""
 
 
 class MLPActors(RowScaled):
@@ -94,10 +83,10 @@ class MLPActors(RowScaled):
     real-row flag each, 9N numbers) -> MLP (two hidden layers of ``mlp_hidden``) -> tanh ->
     desired acceleration (2). One MLP per pursuer (``shared=False``) or one for all."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
-        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
-        members = 1 if cfg.shared else num_pursuers
-        h = cfg.mlp_hidden
+    def __init__(self, lc: MADDPGConfig, num_pursuers: int) -> None:
+        super().__init__(0, lc.obstacle_scale, lc.target_scale)
+        members = 1 if lc.shared else num_pursuers
+        h = lc.mlp_hidden
         self.body = EnsembleMLP(members, [9 * num_pursuers, h, h, 2], small_out=True)
 
     def pre_activation(self, obs: Tensor, mask: Tensor, pred: Tensor | None = None) -> Tensor:
@@ -118,14 +107,14 @@ class CentralCritics(RowScaled):
     The global state holds everything in the pursuers' observations (each is a function of it,
     :func:`pes.algos.features.pursuer_obs`), so it stands for their concatenation."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
-        super().__init__(0, cfg.obstacle_scale, cfg.target_scale)
+    def __init__(self, lc: MADDPGConfig, num_pursuers: int) -> None:
+        super().__init__(0, lc.obstacle_scale, lc.target_scale)
         self.n = num_pursuers
-        members = 1 if cfg.shared else num_pursuers
+        members = 1 if lc.shared else num_pursuers
         self.index = members == 1 and num_pursuers > 1
         size = 8 * (num_pursuers + 1) + num_pursuers + 2 * num_pursuers
         size += num_pursuers if self.index else 0
-        h = cfg.mlp_hidden
+        h = lc.mlp_hidden
         self.body = EnsembleMLP(members, [size, h, h, 1])
 
     def context(self, state: Tensor, alive: Tensor) -> Tensor:
@@ -152,59 +141,38 @@ class CentralCritics(RowScaled):
         return self.each(state, alive, actions.unsqueeze(0).expand(self.n, *actions.shape))
 
 
-class MADDPG(CBCTP):
-    """The MADDPG learner (``algo: maddpg``)."""
+class MADDPG(ActorCritic):
+    """The MADDPG learner (``--algo maddpg``)."""
 
     name = "maddpg"
-
-    def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
-        if cfg.use_tp:
-            raise ConfigError(f"{cfg.algo} has no TP Net: set use_tp=false")
-        super().__init__(cfg, env_cfg, device)
+    Config = MADDPGConfig
+    PRESETS = MADDPG_PRESETS
 
     @staticmethod
-    def make_actor(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        return MLPActors(cfg, num_pursuers)
+    def make_actor(lc: MADDPGConfig, num_pursuers: int) -> nn.Module:
+        return MLPActors(lc, num_pursuers)
 
     @staticmethod
-    def make_critic(cfg: TrainConfig, num_pursuers: int) -> nn.Module:
-        return CentralCritics(cfg, num_pursuers)
+    def make_critic(lc: MADDPGConfig, num_pursuers: int) -> nn.Module:
+        return CentralCritics(lc, num_pursuers)
 
     @staticmethod
     def fixed_swarm(cfg: TrainConfig) -> str | None:
         return "has MLPs whose inputs are sized"
 
-    def update(self, gen: torch.Generator) -> dict[str, float]:
-        """One critic and one actor step for every pursuer on one minibatch (see the module's
-        docstring); returns the losses and the mean Q."""
-        cfg, n = self.cfg, self.n
-        self.updates += 1
-        w = self.sample_windows(gen)
-        state, alive, action = w.state, w.alive, w.action
-        with torch.no_grad():
-            next_obs, next_mask = pursuer_obs(w.next_state, w.next_alive)
-            next_action = self.actor_target(next_obs, next_mask)
-            q_next = self.critic_target(w.next_state, w.next_alive, next_action)
-            keep = (~w.terminated).unsqueeze(-1).float() * w.next_alive.float()
-            y = w.ret + cfg.gamma * w.before_last * keep * q_next
-        q = self.critic(state, alive, action)
-        critic_loss = masked_mean((q - y) ** 2, alive)
-        stats = {
-            "critic_grad": optimise(
-                self.opt_critic, critic_loss, self.critic.parameters(), cfg.grad_clip
-            )
-        }
-        if self.critic_warming():
-            return self.finish_update(None, critic_loss, q, alive, stats)
-
-        # Actor i ascends Q_i with only its own action replaced by its actor's.
-        obs, mask = pursuer_obs(state, alive)
+    def actor_step(
+        self, w: TDWindows, pred: Tensor | None, gen: torch.Generator, stats: dict[str, float]
+    ) -> Tensor:
+        """Actor i ascends Q_i with only its own action replaced by its actor's, for every
+        pursuer on the full minibatch."""
+        obs, mask, _ = self.observe(w.state, w.alive, None)
         pre = self.actor.pre_activation(obs, mask)  # (B, N, 2)
-        own = torch.eye(n, dtype=torch.bool, device=state.device)[:, None, :, None]
-        joint = torch.where(own, torch.tanh(pre).unsqueeze(0), action.unsqueeze(0))
+        if self.demonstrating() and self.bc_weight > 0:
+            return self.cloning_loss(pre, w, stats)
+        own = torch.eye(self.n, dtype=torch.bool, device=w.state.device)[:, None, :, None]
+        joint = torch.where(own, torch.tanh(pre).unsqueeze(0), w.action.unsqueeze(0))
         self.critic.requires_grad_(False)
-        q_pi = self.critic.each(state, alive, joint)
+        q_pi = self.critic.each(w.state, w.alive, joint)
         self.critic.requires_grad_(True)
-        reg = masked_mean((pre**2).sum(-1), alive)
-        actor_loss = -masked_mean(q_pi, alive) + cfg.action_reg * reg
-        return self.finish_update(actor_loss, critic_loss, q, alive, stats)
+        new_action = torch.where(w.alive.unsqueeze(-1), torch.tanh(pre), w.action)
+        return self.actor_objective(q_pi, pre, w.alive, new_action, w, stats)

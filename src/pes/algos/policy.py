@@ -3,31 +3,66 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
+import torch
 from torch import nn
 
-from pes.algos.config import TrainConfig
-from pes.algos.io import (
+from pes.algos.evader_ddpg import DeepSetActor
+from pes.algos.registry import ALGOS, PURSUER_ALGOS
+from pes.errors import CheckpointError, ConfigError
+from pes.learn.checkpoint import (
     CHECKPOINT_FORMAT,
     POLICY_FORMAT,
     load_file,
     load_modules,
     resolve_policy_path,
 )
-from pes.config import from_dict
-from pes.errors import CheckpointError
+from pes.learn.config import TrainConfig, train_config_from_dict
+from pes.models import SHIPPED
 from pes.sim.config import EnvConfig
 
 
-def _read(spec: str | Path) -> tuple[Path, dict, TrainConfig, dict]:
-    path = resolve_policy_path(spec)
-    obj = load_file(path, (POLICY_FORMAT, CHECKPOINT_FORMAT))
+def resolve(spec: str | Path) -> Path:
+    """The file behind a policy spec: a shipped model's name, a run folder, or a path; an
+    algorithm's name with no shipped model is a clear error."""
+    if str(spec) in ALGOS and str(spec) not in SHIPPED and not Path(spec).exists():
+        raise CheckpointError(
+            f"no '{spec}' model is shipped; train one with `pes train --algo {spec}` and pass "
+            "its run folder or policy.pt"
+        )
+    return resolve_policy_path(spec)
+
+
+def recorded_config(obj: dict[str, Any], path: Path) -> TrainConfig:
+    """The training configuration recorded in a policy file or checkpoint. Policy files of
+    format version 1 hold it flat (the learner's keys beside the run's): the learner's and the
+    run's keys are picked from it, the rest (that version's training aids) ignored."""
+    values = dict(obj.get("train_config") or {})
+    algo = values.get("algo")
+    if algo not in ALGOS:
+        raise CheckpointError(f"'{path}' holds a model of an unknown method '{algo}'")
+    cls = ALGOS[algo]
+    if obj.get("version") == 1:
+        learner_keys = {f for f in cls.Config.__dataclass_fields__}
+        run_keys = {f for f in TrainConfig.__dataclass_fields__} - {"protocol", "learner"}
+        values = {k: v for k, v in values.items() if k in run_keys} | {
+            "learner": {k: v for k, v in values.items() if k in learner_keys},
+            "protocol": {},
+            "preset": str(values.get("preset", "quick")),
+        }
     try:
-        cfg = from_dict(TrainConfig, obj["train_config"])
-    except Exception as exc:  # noqa: BLE001
+        return train_config_from_dict(values, cls.Config)
+    except ConfigError as exc:
         raise CheckpointError(
             f"'{path}' holds an unreadable training configuration: {exc}"
         ) from None
+
+
+def _read(spec: str | Path) -> tuple[Path, dict, TrainConfig, dict]:
+    path = resolve(spec)
+    obj = load_file(path, (POLICY_FORMAT, CHECKPOINT_FORMAT))
+    cfg = recorded_config(obj, path)
     states = obj["policy"] if obj["format"] == POLICY_FORMAT else obj["modules"]
     return path, obj, cfg, states
 
@@ -35,8 +70,6 @@ def _read(spec: str | Path) -> tuple[Path, dict, TrainConfig, dict]:
 def load_pursuer_policy(spec: str | Path, env_cfg: EnvConfig, device="cpu"):
     """The pursuer policy in a policy file, run folder, checkpoint or shipped model name, built
     for the scenario ``env_cfg``. Returns (policy, train_config)."""
-    from pes.algos import ALGOS, PURSUER_ALGOS  # noqa: PLC0415
-
     path, _, cfg, states = _read(spec)
     if cfg.algo not in PURSUER_ALGOS:
         raise CheckpointError(f"'{path}' holds a '{cfg.algo}' model, not a pursuer policy")
@@ -53,15 +86,13 @@ def load_pursuer_policy(spec: str | Path, env_cfg: EnvConfig, device="cpu"):
     return policy, cfg
 
 
-def load_evader_actor(spec: str | Path, device="cpu") -> nn.Module:
+def load_evader_actor(spec: str | Path, device: torch.device | str = "cpu") -> nn.Module:
     """The frozen actor of a DDPG evader (policy file, run folder, checkpoint, or
     ``evader-ddpg`` for the shipped one)."""
-    from pes.algos.nets import DeepSetActor  # noqa: PLC0415
-
     path, _, cfg, states = _read(spec)
     if cfg.algo != "evader-ddpg":
         raise CheckpointError(f"'{path}' holds a '{cfg.algo}' model, not a DDPG evader")
-    actor = DeepSetActor(cfg.hidden)
+    actor = DeepSetActor(cfg.learner.hidden)
     load_modules({"actor": actor}, states, str(path))
     actor = actor.to(device).eval()
     actor.requires_grad_(False)
@@ -75,7 +106,7 @@ def describe(spec: str | Path) -> dict:
         "path": str(path),
         "format": obj["format"],
         "algo": cfg.algo,
-        "train_config": obj["train_config"],
+        "train_config": cfg.to_dict(),
         "progress": obj.get("progress", {}),
         "meta": obj.get("meta", {}),
     }
@@ -83,9 +114,13 @@ def describe(spec: str | Path) -> dict:
 
 def is_policy_spec(spec: str) -> bool:
     """Whether ``spec`` names a learned policy (an algorithm or an existing path)."""
-    from pes.algos import PURSUER_ALGOS  # noqa: PLC0415
-
     return spec in PURSUER_ALGOS or Path(spec).exists() or spec.endswith(".pt")
 
 
-__all__ = ["describe", "is_policy_spec", "load_evader_actor", "load_pursuer_policy"]
+__all__ = [
+    "describe",
+    "is_policy_spec",
+    "load_evader_actor",
+    "load_pursuer_policy",
+    "recorded_config",
+]

@@ -26,33 +26,117 @@ are left out of every loss.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import torch
 from torch import Tensor, nn
 
-from pes.algos.buffer import RolloutBuffer, gae
-from pes.algos.common import (
-    ActorPolicy,
-    StochasticActorLearner,
-    gaussian_log_prob,
-    masked_mean,
-    optimise,
-    pursuer_score,
-)
-from pes.algos.config import TrainConfig
-from pes.algos.features import pursuer_obs
-from pes.algos.nets import FlatObsMLP, PerAgent
+from pes.errors import ConfigError
+from pes.learn.buffer import RolloutBuffer, gae
+from pes.learn.common import ActorPolicy, gaussian_log_prob, masked_mean, optimise
+from pes.learn.config import LearnerConfig, TrainConfig
+from pes.learn.features import pursuer_obs
+from pes.learn.learner import Learner
+from pes.learn.nets import FlatObsMLP, PerAgent
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.td import exit_charge
 from pes.sim.config import EnvConfig
+
+
+@dataclass
+class PPOConfig(LearnerConfig):
+    """PPO's settings: gamma and the minibatch from the paper (§V-A), the rest from the PPO
+    paper (Schulman et al., 2017, MuJoCo settings), as the paper gives none for its baselines."""
+
+    gamma: float = 0.95
+    """Discount factor."""
+    lr_actor: float = 3e-4
+    """Adam learning rate of the actor."""
+    lr_critic: float = 3e-4
+    """Adam learning rate of the value function."""
+    hidden: int = 64
+    """Units of each of the two hidden layers of the actor's and the value function's MLPs."""
+    shared: bool = True
+    """One actor and one value function for all pursuers (False: one pair per pursuer)."""
+    obstacle_scale: float = 20.0
+    """Factor on the obstacle-vector columns of the observation rows (``RowScaled``)."""
+    target_scale: float = 5.0
+    """Factor on the vector to the evader in the observation rows."""
+    rollout_steps: int = 2048
+    """Vector steps per rollout (a rollout holds ``rollout_steps * num_envs`` transitions, each
+    with N pursuer samples)."""
+    ppo_epochs: int = 10
+    """Passes over each rollout."""
+    batch_size: int = 512
+    """Minibatch in transitions."""
+    gae_lambda: float = 0.95
+    """Lambda of generalised advantage estimation."""
+    clip_coef: float = 0.2
+    """Clipping range of the probability ratio."""
+    ent_coef: float = 0.0
+    """Weight of the entropy bonus in the actor loss."""
+    target_kl: float = 0.0
+    """Stop a rollout's epochs once the approximate KL exceeds this (0 = never)."""
+    log_std_init: float = -0.5
+    """Initial log standard deviation of the Gaussian policy (in action units)."""
+    grad_clip: float = 1.0
+    """Gradient norm clip (0 = none)."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (
+        "lr_actor",
+        "lr_critic",
+        "hidden",
+        "rollout_steps",
+        "ppo_epochs",
+        "batch_size",
+    )
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = (
+        "obstacle_scale",
+        "target_scale",
+        "ent_coef",
+        "target_kl",
+        "grad_clip",
+    )
+
+    def check(self) -> None:
+        for name in ("gae_lambda", "clip_coef"):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise ConfigError(f"ppo: {name} must be in (0, 1], got {getattr(self, name)}")
+
+
+PPO_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
+    # 64 environments x 64 steps per rollout, 4 minibatches, 10 epochs; ~1 s per update on
+    # one CPU thread, about as long as the rollout's collection.
+    "quick": dict(
+        QUICK_RUN,
+        episodes=7000,
+        num_envs=64,
+        lr_actor=3e-4,
+        lr_critic=1e-3,
+        rollout_steps=64,
+        batch_size=1024,
+    ),
+    "tiny": dict(
+        TINY_RUN,
+        hidden=32,
+        rollout_steps=16,
+        batch_size=32,
+        ppo_epochs=4,
+        protocol=TINY_PROTOCOL,
+    ),
+}
 
 
 class GaussianActor(nn.Module):
     """A diagonal Gaussian policy: mean from a :class:`FlatObsMLP`, log std a free parameter
     (independent of the state)."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+    def __init__(self, lc: PPOConfig, num_pursuers: int) -> None:
         super().__init__()
-        self.mean = FlatObsMLP(num_pursuers, cfg.hidden, 2, 2, cfg.obstacle_scale, cfg.target_scale)
-        self.log_std = nn.Parameter(torch.full((2,), cfg.log_std_init))
+        self.mean = FlatObsMLP(num_pursuers, lc.hidden, 2, 2, lc.obstacle_scale, lc.target_scale)
+        self.log_std = nn.Parameter(torch.full((2,), lc.log_std_init))
 
     def forward(self, obs: Tensor, mask: Tensor) -> Tensor:
         """obs (B, N, 8), mask (B, N) -> (B, 4): mean (2) and log std (2)."""
@@ -63,9 +147,9 @@ class GaussianActor(nn.Module):
 class PPOActors(nn.Module):
     """The pursuers' Gaussian actors (shared or one each), on observations (B, N, N, 8)."""
 
-    def __init__(self, cfg: TrainConfig, num_pursuers: int) -> None:
+    def __init__(self, lc: PPOConfig, num_pursuers: int) -> None:
         super().__init__()
-        self.nets = PerAgent(lambda: GaussianActor(cfg, num_pursuers), num_pursuers, cfg.shared)
+        self.nets = PerAgent(lambda: GaussianActor(lc, num_pursuers), num_pursuers, lc.shared)
 
     def forward(self, obs: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
         """obs (B, N, N, 8), mask (B, N, N) -> mean and log std, each (B, N, 2)."""
@@ -77,29 +161,45 @@ class PPOActors(nn.Module):
         return self(obs, mask)[0].clamp(-1.0, 1.0)
 
 
-class PPO(StochasticActorLearner):
+class PPO(Learner):
     """The PPO learner (independent learners, parameter-shared by default)."""
 
     name = "ppo"
-    Actor = PPOActors
+    Config = PPOConfig
+    PRESETS = PPO_PRESETS
     on_policy = True
+    AIDS: ClassVar[dict[str, str]] = {
+        "noise": "not applied: PPO explores by its Gaussian policy's own spread (log_std_init, "
+        "ent_coef)",
+        "n_step": "not applied: PPO's targets are GAE returns over the whole rollout (gae_lambda)",
+        "greedy_envs": "not applied: an on-policy update needs every sample drawn from the policy",
+        "demonstrations": "not applied: an on-policy update learns only from the current "
+        "policy's samples, and a replay buffer to hold demonstrations is what PPO lacks",
+        "charge_exits": "",
+    }
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
-        self.cfg = cfg
+        super().__init__(cfg, env_cfg, device)
+        self.lc = lc = cfg.learner
         self.n = n = env_cfg.num_pursuers
         self.max_steps = env_cfg.max_steps
-        self.device = device
-        self.actor = self.Actor(cfg, n).to(device)
+        crash = cfg.protocol.crash_curriculum
+        self.exits = (
+            (env_cfg.capture_count, env_cfg.crash_reward)
+            if crash is not None and crash.charge_exits
+            else None
+        )
+        self.actor = PPOActors(lc, n).to(device)
         self.value = PerAgent(
-            lambda: FlatObsMLP(n, cfg.hidden, 1, 2, cfg.obstacle_scale, cfg.target_scale),
+            lambda: FlatObsMLP(n, lc.hidden, 1, 2, lc.obstacle_scale, lc.target_scale),
             n,
-            cfg.shared,
+            lc.shared,
         ).to(device)
         self.policy = ActorPolicy(self.actor)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor, eps=1e-5)
-        self.opt_critic = torch.optim.Adam(self.value.parameters(), lr=cfg.lr_critic, eps=1e-5)
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=lc.lr_actor, eps=1e-5)
+        self.opt_critic = torch.optim.Adam(self.value.parameters(), lr=lc.lr_critic, eps=1e-5)
         self.buffer = RolloutBuffer(
-            cfg.rollout_steps,
+            lc.rollout_steps,
             cfg.num_envs,
             {
                 "state": ((n + 1, 8), torch.float32),
@@ -112,15 +212,17 @@ class PPO(StochasticActorLearner):
             },
             device,
         )
-        self.noise = None  # exploration is the policy's own sampling
-        self.updates = 0
         self._acting: dict[str, Tensor] = {}
         self._last_value: Tensor | None = None
 
     @staticmethod
-    def adapt_env(env_cfg: EnvConfig) -> EnvConfig:
-        """The training scenario (unchanged: the configured evader plays)."""
-        return env_cfg
+    def fixed_swarm(cfg: TrainConfig) -> str | None:
+        return "has MLPs whose inputs are sized"
+
+    @classmethod
+    def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device):
+        actor = PPOActors(cfg.learner, env_cfg.num_pursuers).to(device)
+        return ActorPolicy(actor), {"actor": actor}
 
     # --- acting ----------------------------------------------------------------------------------
     def values(self, state: Tensor, alive: Tensor) -> Tensor:
@@ -150,10 +252,14 @@ class PPO(StochasticActorLearner):
         next_alive = after["final_obs_mask"][:, :, 0]
         next_nonterminal = (~(terminated | truncated)).unsqueeze(-1) & next_alive
         reward = reward.clone()
+        gamma = self.lc.gamma
         if bool(truncated.any()):
             bootstrap = self.values(after["final_state"], next_alive)
             keep = truncated.unsqueeze(-1) & next_alive
-            reward += self.cfg.gamma * bootstrap * keep.float()
+            reward += gamma * bootstrap * keep.float()
+        if self.exits is not None:  # a pursuer leaving owes what the TD learners charge it
+            alive = before["obs_mask"][:, :, 0]
+            reward += exit_charge(reward, alive, next_alive, terminated, gamma, *self.exits)
         self.buffer.add(
             state=before["state"],
             alive=before["obs_mask"][:, :, 0],
@@ -164,8 +270,9 @@ class PPO(StochasticActorLearner):
         if self.buffer.full:
             self._last_value = self.values(after["state"], after["obs_mask"][:, :, 0])
 
-    def episode_reset(self, done: Tensor) -> None:
-        """Stateless between episodes."""
+    def on_restart(self) -> None:
+        """A rollout does not span a restart of the environments: it starts afresh."""
+        self.buffer.clear()
 
     # --- learning --------------------------------------------------------------------------------
     def ready(self) -> bool:
@@ -175,7 +282,7 @@ class PPO(StochasticActorLearner):
     def update(self, gen: torch.Generator) -> dict[str, float]:
         """``ppo_epochs`` passes of clipped-surrogate and value updates over the rollout, which
         is then cleared; returns the mean metrics."""
-        cfg, data = self.cfg, self.buffer.data
+        cfg, data = self.lc, self.buffer.data
         adv, ret = gae(
             data["reward"],
             data["value"],
@@ -221,7 +328,7 @@ class PPO(StochasticActorLearner):
 
     def _minibatch(self, obs, mask, live, batch) -> dict[str, float]:
         """One gradient step of the actor and of V on a minibatch (B transitions, N pursuers)."""
-        cfg = self.cfg
+        cfg = self.lc
         mean, log_std = self.actor(obs, mask)
         logp = gaussian_log_prob(batch["action"], mean, log_std)
         log_ratio = logp - batch["logp"]
@@ -247,8 +354,6 @@ class PPO(StochasticActorLearner):
                 "clip_frac": float(masked_mean(clipped, live)),
                 "noise": float(masked_mean(log_std.exp().mean(-1), live)),
             }
-
-    score = staticmethod(pursuer_score)
 
     # --- saving ----------------------------------------------------------------------------------
     def modules(self) -> dict[str, nn.Module]:

@@ -30,6 +30,7 @@ from pathlib import Path
 import torch
 
 from pes.evaluate import evaluate
+from pes.models import is_shipped
 from pes.policies import PIDPotentialField, RandomPolicy
 from pes.sim.bench import machine_info
 from pes.sim.config import EnvConfig
@@ -57,8 +58,6 @@ def evader_speed_case(speed: float) -> str:
 def cases() -> dict[str, tuple[type, dict]]:
     """Every case measured: :data:`CASES`, then the default DDPG evader, then the fully trained
     one at :data:`EVADER_SPEEDS` (those of the shipped evaders this installation has)."""
-    from pes.algos.io import is_shipped  # noqa: PLC0415
-
     out = dict(CASES)
     if is_shipped("evader-ddpg-paper"):
         out[PAPER_EVADER_CASE] = (

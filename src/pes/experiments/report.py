@@ -16,8 +16,11 @@ from typing import Any
 
 import numpy as np
 
+from pes.algos.policy import load_pursuer_policy
+from pes.experiments.budgets import BUDGETS, DAMAGED, EVAL_SEED, eval_config, write_json
 from pes.experiments.paper import LABELS, TABLE4, TABLE5, TABLE6
-from pes.experiments.trials import BUDGETS, DAMAGED, EVAL_SEED, eval_config, write_json
+from pes.record import plot_trajectories, record_episode
+from pes.sim.bench import machine_info
 
 
 def _load(out: Path, specs: list[dict]) -> dict[str, dict]:
@@ -240,9 +243,6 @@ def _seed0(specs: list[dict], done: dict, algo: str) -> Path | None:
 
 
 def _trajectory_figures(out, specs, done, meta, folder, plt) -> list[tuple[str, str]]:
-    from pes.algos.policy import load_pursuer_policy  # noqa: PLC0415
-    from pes.record import plot_trajectories, record_episode  # noqa: PLC0415
-
     budget = BUDGETS[meta["budget"]]
     seed = EVAL_SEED
     made = []
@@ -317,8 +317,6 @@ def write_report(
     seconds: float,
 ) -> list[str]:
     """Write every table and figure the finished trials allow; returns the files written."""
-    from pes.sim.bench import machine_info  # noqa: PLC0415
-
     done = _load(out, specs)
     machine = machine_info()
     cfg = eval_config(BUDGETS[budget])

@@ -21,8 +21,10 @@ from typing import Any
 
 from tqdm import tqdm
 
+from pes.algos import ALGOS
 from pes.errors import ConfigError
 from pes.experiments.paper import METHODS
+from pes.experiments.report import write_report
 from pes.experiments.trials import BUDGETS, make_trials, run_trial
 
 TARGETS = ("table4", "table5", "table6", "figures", "all")
@@ -30,8 +32,6 @@ TARGETS = ("table4", "table5", "table6", "figures", "all")
 
 def available_methods() -> list[str]:
     """The methods of Table IV (and CBC Net) that this installation can train."""
-    from pes.algos import ALGOS  # noqa: PLC0415
-
     return [m for m in METHODS if m == "pid-pf" or m in ALGOS]
 
 
@@ -124,9 +124,7 @@ def run_ray(
             _on_trial("finish", trial.config["spec"]["id"])
 
     def trainable(config: dict[str, Any]) -> None:
-        from pes.experiments.trials import run_trial as run  # noqa: PLC0415
-
-        run(config["spec"], Path(config["out"]), threads=1)
+        run_trial(config["spec"], Path(config["out"]), threads=1)
         tune.report({"finished": 1})
 
     global _ACTIVE_VIEW
@@ -179,8 +177,6 @@ def reproduce(
     ``parallel``: at most this many trials at once under Ray (0: one per CPU).
     ``report_only``: run nothing; write the report of the trials finished so far.
     """
-    from pes.experiments.report import write_report  # noqa: PLC0415
-
     if budget not in BUDGETS:
         raise ConfigError(f"budget must be one of {', '.join(BUDGETS)}, got '{budget}'")
     if seeds < 1:

@@ -23,6 +23,13 @@ from typing import Any
 
 import torch
 
+from pes.algos.cbc_tp import TPNet
+from pes.algos.policy import load_pursuer_policy
+from pes.experiments.budgets import EVAL_SEED, eval_config
+from pes.models import is_shipped
+from pes.policies import PIDPotentialField
+from pes.sim.env import make_env
+
 HORIZON = 5
 """k = 1 ... 5, as Table V."""
 
@@ -30,8 +37,6 @@ HORIZON = 5
 def collect(policy, config, episodes: int, seed: int) -> list[torch.Tensor]:
     """Play ``episodes`` episodes; returns each episode's history frames (T + 1, A, 4), the
     frame after the reset first and the final frame last."""
-    from pes.sim.env import make_env  # noqa: PLC0415
-
     num_envs = min(episodes, 50)
     env = make_env(config, num_envs=num_envs, seed=seed)
     obs, info = env.reset(seed=seed)
@@ -81,12 +86,6 @@ def errors(pred: torch.Tensor, future: torch.Tensor) -> dict[str, list[float]]:
 
 def run_tpnet(spec: dict, budget, folder: Path) -> dict[str, Any]:
     """One Table V trial; returns (and the caller stores) its FDE / ADE."""
-    from pes.algos.io import is_shipped  # noqa: PLC0415
-    from pes.algos.nets import TPNet  # noqa: PLC0415
-    from pes.algos.policy import load_pursuer_policy  # noqa: PLC0415
-    from pes.experiments.trials import EVAL_SEED, eval_config  # noqa: PLC0415
-    from pes.policies import PIDPotentialField  # noqa: PLC0415
-
     seed = spec["seed"]
     cfg = eval_config(budget)
     if is_shipped("cbc-tp"):

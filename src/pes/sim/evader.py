@@ -14,6 +14,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
+from pes.errors import ConfigError
 from pes.sim import rng
 from pes.sim.dynamics import Vehicles
 from pes.sim.geometry import ray_distance
@@ -110,6 +111,29 @@ class RandomEvader:
         u = rng.uniform(key, 0 * 8 + STREAM_EVADER_RANDOM)
         w = rng.uniform(key, 1 * 8 + STREAM_EVADER_RANDOM)
         return u * 2.0 - 1.0, w * 2.0 - 1.0
+
+
+EvaderModelLoader = Callable[[str, torch.device], torch.nn.Module]
+"""``loader(evader_model, device)`` -> the frozen evader network ``(E, A, 8) -> (E, 2)``."""
+
+_model_loader: EvaderModelLoader | None = None
+
+
+def register_model_loader(loader: EvaderModelLoader) -> None:
+    """Set how ``evader_policy="ddpg"`` loads ``EnvConfig.evader_model`` (a shipped model's name
+    or a policy file). The simulator knows no learner: :mod:`pes.algos` registers its loader
+    when it is imported, as ``import pes`` does."""
+    global _model_loader
+    _model_loader = loader
+
+
+def load_model(spec: str, device: torch.device) -> torch.nn.Module:
+    """The frozen evader network ``spec`` through the registered loader."""
+    if _model_loader is None:
+        raise ConfigError(
+            "evader_policy='ddpg' needs an evader model loader: import pes (or pes.algos) first"
+        )
+    return _model_loader(spec, device)
 
 
 class NetworkEvader:

@@ -45,7 +45,7 @@ from pes.sim.dynamics import (
     point_mass_step,
     quadrotor_step,
 )
-from pes.sim.evader import EvaderPolicy, FleeEvader, NetworkEvader, RandomEvader
+from pes.sim.evader import EvaderPolicy, FleeEvader, NetworkEvader, RandomEvader, load_model
 from pes.sim.geometry import (
     Roadmap,
     build_roadmap,
@@ -214,9 +214,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
     elif config.evader_policy == "random":
         scenario.evader_policy = RandomEvader()
     elif config.evader_policy == "ddpg":
-        from pes.algos.policy import load_evader_actor  # noqa: PLC0415 - learners import sim
-
-        actor = load_evader_actor(config.evader_model, device)
+        actor = load_model(config.evader_model, device)
         scenario.evader_policy = NetworkEvader(
             actor, lambda v, f: observe(scenario, v, f)["evader_obs"]
         )

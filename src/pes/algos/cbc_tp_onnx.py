@@ -31,9 +31,11 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from pes.algos.cbc_tp import CBCTPPolicy, PursuerActors
-from pes.algos.nets import TPNet
+from pes.algos.cbc_tp import PursuerActors, TPNet
+from pes.algos.policy import describe, load_pursuer_policy
 from pes.errors import CheckpointError, PESError
+from pes.learn.actor_critic import DeterministicPolicy
+from pes.sim.config import EnvConfig
 
 EXPORTABLE = ("cbc-tp", "cbc")
 """The algorithms whose policies ``export_onnx`` takes."""
@@ -83,21 +85,17 @@ def load_exportable(spec: str | Path) -> tuple[ExportablePolicy, Any]:
     """The CBC-TP / CBC policy of a policy file, run folder, checkpoint or shipped name as an
     :class:`ExportablePolicy` (eval mode), and its training config. A missing or corrupted file,
     or a model of another architecture, is a CheckpointError."""
-    from pes.algos.config import TrainConfig
-    from pes.algos.policy import describe, load_pursuer_policy
-    from pes.config import from_dict
-
     info = describe(spec)
     if info["algo"] not in EXPORTABLE:
         raise CheckpointError(
             f"'{info['path']}' holds a '{info['algo']}' model; export-onnx takes "
             f"{' or '.join(EXPORTABLE)} pursuer policies"
         )
-    scenario = from_dict(TrainConfig, info["train_config"]).env_config()
+    scenario = EnvConfig.from_dict(info["train_config"]["env"])
     policy, cfg = load_pursuer_policy(spec, scenario)
-    if not isinstance(policy, CBCTPPolicy):
+    if not isinstance(policy, DeterministicPolicy) or not isinstance(policy.actor, PursuerActors):
         raise CheckpointError(f"'{spec}' does not hold a CBC actor")
-    model = ExportablePolicy(policy.actor, policy.tp).eval()
+    model = ExportablePolicy(policy.actor, getattr(policy, "tp", None)).eval()
     model.requires_grad_(False)
     return model, cfg
 

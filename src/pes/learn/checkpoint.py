@@ -19,27 +19,14 @@ import torch
 from torch import nn
 
 from pes.errors import CheckpointError
-from pes.sim.config import SHIPPED_EVADERS, EnvConfig
+from pes.models import MODELS_DIR, SHIPPED
 
 CHECKPOINT_FORMAT = "pes-checkpoint"
 POLICY_FORMAT = "pes-policy"
-VERSION = 1
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
-"""Where the shipped policy files and their model cards live."""
-SHIPPED = {name: f"{name.replace('-', '_')}.pt" for name in ("cbc-tp", *SHIPPED_EVADERS)}
-"""Shipped policy files by name: the CBC-TP Net swarm and the DDPG evaders of
-:data:`pes.sim.config.SHIPPED_EVADERS` (``cbc-tp`` -> ``cbc_tp.pt``)."""
-
-
-def is_shipped(name: str) -> bool:
-    """Whether this installation holds the shipped model ``name`` (a key of :data:`SHIPPED`)."""
-    return (MODELS_DIR / SHIPPED[name]).is_file()
-
-
-def default_evader_policy() -> str:
-    """The evader of every evaluation: ``ddpg`` (the default ``EnvConfig.evader_model``) if this
-    installation holds that evader, ``flee`` if not."""
-    return "ddpg" if is_shipped(EnvConfig().evader_model) else "flee"
+VERSION = 2
+"""Version 2: the training configuration in sections (``learner``, ``protocol``, ``env``).
+Policy files of version 1 (a flat configuration) still load (:mod:`pes.algos.policy`)."""
+READABLE_POLICY_VERSIONS = (1, 2)
 
 
 def save_atomic(obj: dict[str, Any], path: str | Path) -> None:
@@ -64,6 +51,24 @@ def save_atomic(obj: dict[str, Any], path: str | Path) -> None:
         pass
 
 
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file renamed over it: a reader (or a run
+    killed mid-write) sees the old file or the new one, never a torn one."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Delete the temporary files that writers killed mid-write left in ``folder`` (names
+    ``.NAME.PID.tmp``); returns them."""
+    stale = sorted(Path(folder).glob(".*.tmp"))
+    for path in stale:
+        path.unlink(missing_ok=True)
+    return stale
+
+
 def save_policy_file(
     path: str | Path,
     algo: str,
@@ -71,22 +76,22 @@ def save_policy_file(
     env_config: dict[str, Any],
     policy: dict[str, Any],
     meta: dict[str, Any],
-) -> None:
+) -> dict[str, Any]:
     """Write a policy file atomically: the acting networks' state dicts (``policy``, e.g.
     ``{"actor": ..., "tp": ...}``), the configurations (as plain dicts) that rebuild them, and
-    ``meta`` (counters such as episodes, env steps, updates, wall time in s)."""
-    save_atomic(
-        {
-            "format": POLICY_FORMAT,
-            "version": VERSION,
-            "algo": algo,
-            "train_config": train_config,
-            "env_config": env_config,
-            "policy": policy,
-            "meta": meta,
-        },
-        path,
-    )
+    ``meta`` (counters such as episodes, env steps, updates, wall time in s). Returns what was
+    written."""
+    payload = {
+        "format": POLICY_FORMAT,
+        "version": VERSION,
+        "algo": algo,
+        "train_config": train_config,
+        "env_config": env_config,
+        "policy": policy,
+        "meta": meta,
+    }
+    save_atomic(payload, path)
+    return payload
 
 
 def load_file(path: str | Path, expected: str | tuple[str, ...]) -> dict[str, Any]:
@@ -103,7 +108,8 @@ def load_file(path: str | Path, expected: str | tuple[str, ...]) -> dict[str, An
         ) from None
     if not isinstance(obj, dict) or obj.get("format") not in expected:
         raise CheckpointError(f"'{path}' is not a PES {' or '.join(expected)} file")
-    if obj.get("version") != VERSION:
+    readable = READABLE_POLICY_VERSIONS if obj["format"] == POLICY_FORMAT else (VERSION,)
+    if obj.get("version") not in readable:
         raise CheckpointError(
             f"'{path}' has format version {obj.get('version')}, this PES reads {VERSION}"
         )
@@ -136,13 +142,6 @@ def resolve_policy_path(spec: str | Path) -> Path:
             )
         return path
     path = Path(spec)
-    from pes.algos import ALGOS  # noqa: PLC0415 - the registry imports the learners
-
-    if str(spec) in ALGOS and not path.exists():
-        raise CheckpointError(
-            f"no '{spec}' model is shipped; train one with `pes train --algo {spec}` and pass "
-            "its run folder or policy.pt"
-        )
     if path.is_dir():
         for name in ("policy.pt", "checkpoint.pt"):
             if (path / name).is_file():
