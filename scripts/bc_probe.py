@@ -17,10 +17,10 @@ import json
 import time
 
 import torch
+from pes.algos.config import build_train_config
 
 import pes
 from pes.algos.cbc_tp import CBCTP
-from pes.algos.config import build_train_config
 from pes.evaluate import evaluate
 
 

@@ -34,14 +34,6 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pes.algos.io import (  # noqa: E402
-    CHECKPOINT_FORMAT,
-    MODELS_DIR,
-    POLICY_FORMAT,
-    SHIPPED,
-    load_file,
-    save_policy_file,
-)
 from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
 from pes.experiments.calibration import (  # noqa: E402
@@ -49,6 +41,14 @@ from pes.experiments.calibration import (  # noqa: E402
     PAPER_EVADER_CASE,
     evader_speed_case,
 )
+from pes.learn.checkpoint import (  # noqa: E402
+    CHECKPOINT_FORMAT,
+    POLICY_FORMAT,
+    VERSION,
+    load_file,
+    save_policy_file,
+)
+from pes.models import MODELS_DIR, SHIPPED  # noqa: E402
 from pes.policies import PIDPotentialField  # noqa: E402
 from pes.sim.bench import machine_info  # noqa: E402
 from pes.sim.config import SHIPPED_EVADERS, EnvConfig  # noqa: E402
@@ -188,12 +188,14 @@ def main() -> None:
     lines = [
         f"# Model card: `{args.name}`",
         "",
-        f"File: `src/pes/models/{SHIPPED[args.name]}` (a PES policy file, format version 1).",
+        f"File: `src/pes/models/{SHIPPED[args.name]}` (a PES policy file, format version "
+        f"{VERSION}).",
         "",
         "## How it was trained",
         "",
         f"* command: `{args.command}`",
-        f"* algorithm `{cfg['algo']}`, preset `{cfg['preset']}`, seed {cfg['seed']}; "
+        f"* algorithm `{cfg['algo']}`, preset `{cfg['preset']}`, protocol "
+        f"`{cfg['protocol']['name']}`, seed {cfg['seed']}; "
         f"scenario overrides: `{json.dumps(cfg['env'])}`",
         f"* {meta.get('episodes')} episodes, {meta.get('env_steps')} env steps, "
         f"{meta.get('updates')} updates, {meta.get('wall_s')} s wall time"

@@ -14,8 +14,7 @@ import pytest
 import torch
 
 import pes
-from pes.algos import build_train_config
-from pes.algos.cbc_tp import CBCTP
+from pes.algos import ALGOS, build_train_config
 from pes.algos.policy import load_pursuer_policy
 from pes.cli import main
 from pes.config import to_dict
@@ -136,7 +135,7 @@ def _policy_file(path: Path, algo: str, **values) -> Path:
     """An untrained policy file of ``algo`` with a last layer large enough that the actions are
     far from zero (the trainer's initialisation starts them near 0)."""
     cfg = build_train_config(algo, "tiny", values)
-    policy, modules = CBCTP.build_policy(cfg, cfg.env_config(), "cpu")
+    policy, modules = ALGOS[cfg.algo].build_policy(cfg, cfg.env_config(), "cpu")
     torch.manual_seed(0)
     for net in policy.actor.nets:
         torch.nn.init.normal_(net.head[-1].weight, std=0.5)

@@ -34,10 +34,9 @@ def test_registered_with_presets():
         assert algo in ALGOS and algo in PURSUER_ALGOS
         for preset in ("paper", "quick", "tiny"):
             cfg = build_train_config(algo, preset)
-            assert not cfg.use_tp
-    assert not build_train_config("maddpg", "quick").shared  # one actor/critic per pursuer
-    assert build_train_config("bicnet", "quick").actor_gradient == "all"
-    paper = build_train_config("maddpg", "paper")
+            assert not hasattr(cfg.learner, "tp_hidden")  # no TP Net
+    assert not build_train_config("maddpg", "quick").learner.shared  # one actor/critic each
+    paper = build_train_config("maddpg", "paper").learner
     assert (paper.gamma, paper.lr_actor, paper.tau, paper.batch_size) == (0.95, 1e-3, 1e-2, 512)
 
 
@@ -57,7 +56,7 @@ def test_ensemble_members_are_independent():
 def test_maddpg_critic_is_central_and_ddpg_critic_is_local():
     cfg = build_train_config("maddpg", "tiny")
     torch.manual_seed(0)
-    central, local = CentralCritics(cfg, 5), LocalCritics(cfg, 5)
+    central, local = CentralCritics(cfg.learner, 5), LocalCritics(cfg.learner, 5)
     _, info = _state(5)
     state, alive = info["state"], info["obs_mask"][:, :, 0]
     a = torch.rand(6, 5, 2) * 2 - 1
@@ -97,11 +96,11 @@ def test_damaged_pursuers_are_masked(algo):
 def test_bicnet_serves_any_swarm_size_and_maddpg_does_not(tmp_path):
     cfg = build_train_config("bicnet", "tiny")
     torch.manual_seed(0)
-    actor = BiCNetActor(cfg)
+    actor = BiCNetActor(cfg.learner)
     for n in (1, 3, 8):
         obs, info = _state(n, num_envs=2)
         assert actor(obs, info["obs_mask"]).shape == (2, n, 2)
-    mlp = MLPActors(build_train_config("maddpg", "tiny"), 5)
+    mlp = MLPActors(build_train_config("maddpg", "tiny").learner, 5)
     obs, info = _state(5, num_envs=2)
     assert mlp(obs, info["obs_mask"]).abs().max() < 0.01  # small last layer: it starts hovering
     for algo in BASELINES:
@@ -123,16 +122,10 @@ def test_unshipped_algorithm_name_is_a_clear_error(capsys):
 
 
 def test_bad_settings_are_refused():
-    for values, match in (
-        ({"shared": False}, "shared"),
-        ({"actor_gradient": "one"}, "actor_gradient"),
-        ({"use_tp": True}, "TP Net"),
-    ):
-        with pytest.raises(ConfigError, match=match):
-            ALGOS["bicnet"](build_train_config("bicnet", "tiny", values), pes.EnvConfig(), "cpu")
-    with pytest.raises(ConfigError, match="TP Net"):
-        cfg = build_train_config("maddpg", "tiny", {"use_tp": True})
-        ALGOS["maddpg"](cfg, pes.EnvConfig(), "cpu")
+    """A key the method does not read is an error naming the method."""
+    for algo, key in (("bicnet", "shared"), ("bicnet", "actor_gradient"), ("maddpg", "lr_tp")):
+        with pytest.raises(ConfigError, match=f"unknown key '{key}' for {algo}"):
+            build_train_config(algo, "tiny", {key: 1})
 
 
 @pytest.mark.parametrize("algo", BASELINES)

@@ -206,7 +206,7 @@ def export_onnx(
         "bytes": out.stat().st_size,
         "num_pursuers": "dynamic" if shared else trained_n,
         "history_length": history_length,
-        "horizon": cfg.horizon if with_tp else 0,
+        "horizon": cfg.learner.horizon if with_tp else 0,
         **graph_signature(out),
         "opset": written,
     }

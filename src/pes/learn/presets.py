@@ -21,7 +21,7 @@ TINY_RUN: dict[str, Any] = dict(
 """Run keys of every method's ``tiny`` preset (tests: seconds per run)."""
 
 TINY_PROTOCOL: dict[str, Any] = dict(
-    noise=dict(decay_episodes=20), demonstrations=dict(transitions=2000)
+    noise=dict(decay_episodes=20), demonstrations=dict(transitions=400)
 )
 """The ``tiny`` preset's scaling of the protocol's aids: the noise falls over its first 20
-episodes, and the demonstrations fill 2000 transitions."""
+episodes, and the demonstrations fill 400 transitions."""
