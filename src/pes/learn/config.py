@@ -171,8 +171,8 @@ def build_train_config(
     preset_values = dict(presets[preset])
     # a preset scales the aids the protocol has; it turns none on
     scaling = preset_values.pop("protocol", {})
-    base = to_dict(PROTOCOLS[name]) if name in PROTOCOLS else {}
-    preset_values["protocol"] = {k: v for k, v in scaling.items() if base.get(k) is not None}
+    active = PROTOCOLS[name].active() if name in PROTOCOLS else []
+    preset_values["protocol"] = {k: v for k, v in scaling.items() if k in active}
     layers = [
         split_values(preset_values, learner_keys, algo),
         split_values(values, learner_keys, algo),
