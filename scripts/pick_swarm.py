@@ -5,10 +5,10 @@
 
 Training success (OU noise, no disturbance, crashed pursuers fly on) and the paper's
 evaluation (disturbance on, crashes disable a pursuer) disagree, and the evaluated success of
-a run swings between neighbouring policies (docs/algorithms/cbc_tp.md). This script picks a
-run's policy in two rounds, both with the paper's protocol against the shipped DDPG evader
-(or ``--evader``) on the seed ``--seed``, which is held out: the model card and ``pes eval``
-report seed 0, whose environments are seeded 0 ... num_envs - 1.
+a run swings between neighbouring policies (research/demonstrations_and_curricula.md). This
+script picks a run's policy in two rounds, both with the paper's protocol against the shipped
+DDPG evader (or ``--evader``) on the seed ``--seed``, which is held out: the model card and
+``pes eval`` report seed 0, whose environments are seeded 0 ... num_envs - 1.
 
 1. screen: every ``--every``-th snapshot of ``RUN/snapshots/`` (``snapshots=true`` keeps the
    policy of every log row), plus the run's ``policy.pt`` and any ``--extra`` policy file or

@@ -1,13 +1,15 @@
 """How well does the CBC-TP actor imitate PID(PF) by behaviour cloning alone?
 
-    python scripts/bc_probe.py --speed 8 --transitions 150000 --rounds 8
+    python research/probes/bc_probe.py --speed 8 --transitions 150000 --rounds 8
 
 Lets PID(PF) play ``--transitions`` transitions of the quick preset's 32 environments against
-the shipped evader capped at ``--speed`` m/s (as ``demo_policy=pid-pf`` does), then runs the
+the default DDPG evader capped at ``--speed`` m/s (as ``demo_policy=pid-pf`` does; the recorded
+result was measured when the default was the fully trained ``evader-ddpg``), then runs the
 learner's updates with the actor on the behaviour-cloning term alone (as while a demonstrator
 plays) and, every 2000 updates, evaluates the actor (100 episodes, disturbance, crashes
 disable, at the same speed). Prints one JSON line per round. Results:
-results/training/cbc_tp_demo_curriculum/.
+results/training/cbc_tp_demo_curriculum/bc_probe.log; the report:
+research/demonstrations_and_curricula.md.
 """
 
 from __future__ import annotations
