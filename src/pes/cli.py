@@ -13,7 +13,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from pes import __version__
 from pes.config import load_yaml, parse_override
@@ -22,6 +22,15 @@ from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
 
 EXIT_USER_ERROR = 2
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose mistakes end in one line on stderr and exit status 2 (SPEC §5),
+    not argparse's usage block; ``--help`` still prints the full usage."""
+
+    def error(self, message: str) -> NoReturn:
+        text = " ".join(message.split())
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {text} (see '{self.prog} --help')\n")
 
 
 # --- shared options ------------------------------------------------------------------------
@@ -406,12 +415,12 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="pes",
         description="PES: multi-quadcopter pursuit-evasion (Game of Drones, TNNLS 2022).",
     )
     parser.add_argument("--version", action="version", version=f"pes {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
 
     p = sub.add_parser(
