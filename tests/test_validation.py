@@ -3,9 +3,19 @@ command line), never a traceback and never a silent fix (SPEC §5, issue 30)."""
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
+import math
+import typing
+
+import numpy as np
 import pytest
 
+import pes
 from pes.cli import main
+from pes.config import load_yaml, read_text_file
+from pes.errors import ConfigError
+from pes.sim.layout import Layout
 
 
 def one_line_error(capsys) -> str:
@@ -41,3 +51,119 @@ def test_help_still_prints_usage(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["eval", "--help"])
     assert exit_.value.code == 0 and "usage: pes eval" in capsys.readouterr().out
+
+
+# --- 1. layout and config files ---------------------------------------------------------------
+
+BINARY = bytes(range(256)) * 4
+
+
+def layout_error(tmp_path, text: str | bytes, name: str = "city.yaml") -> str:
+    path = tmp_path / name
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    with pytest.raises(ConfigError) as error:
+        pes.make_env({"layout": str(path)})
+    message = str(error.value)
+    assert "\n" not in message
+    return message
+
+
+@pytest.mark.parametrize("name", ["city.yaml", "city.txt"])
+def test_binary_layout_file(tmp_path, name):
+    assert "not a text file" in layout_error(tmp_path, BINARY, name)
+
+
+@pytest.mark.parametrize(
+    "text, field",
+    [
+        ("arena: foo\nbuildings: []\n", "arena"),
+        ("arena: [100]\nbuildings: []\n", "arena"),
+        ("buildings: [[1, 1, 5, 5]]\nheights: [abc]\n", "heights"),
+        ("buildings: [[1, 1, 5, 5]]\nheights: 5\n", "heights"),
+        ("buildings: [[1, 1, 5, 5]]\nheights: [-3]\n", "heights"),
+        ("buildings: [[1, 1, .nan, 5]]\n", "buildings[0]"),
+        ("buildings: [[1, 1, .inf, 5]]\n", "buildings[0]"),
+        ("buildings: [[1, 1, 5, 5, 10, 10, 20, 20]]\n", "buildings[0]"),
+        ("buildings: [[1, 1], [5, 5]]\n", "buildings[0]"),
+        ("buildings: [[1, 1, 5, 5], [2, 2, 3]]\n", "buildings[1]"),
+        ("buildings: [[1, 1, x, 5]]\n", "buildings[0]"),
+        ("buildings: 7\n", "buildings"),
+        ("{1: 2, buildings: []}\n", "unknown layout keys"),
+    ],
+)
+def test_bad_layout_fields_are_named(tmp_path, text, field):
+    assert field in layout_error(tmp_path, text)
+
+
+def test_layout_class_rejects_non_finite_and_wrong_rows():
+    with pytest.raises(ConfigError, match="finite"):
+        Layout(100.0, 100.0, np.array([[1.0, 1.0, np.nan, 5.0]]), np.array([30.0]))
+    with pytest.raises(ConfigError, match="xmin, ymin, xmax, ymax"):
+        Layout(100.0, 100.0, np.arange(8.0).reshape(1, 8), np.array([30.0]))
+
+
+def test_binary_config_file_through_the_cli(tmp_path, capsys):
+    path = tmp_path / "config.yaml"
+    path.write_bytes(BINARY)
+    assert main(["eval", "--policy", "pid-pf", "--config", str(path)]) == 2
+    assert "not a text file" in one_line_error(capsys)
+    with pytest.raises(ConfigError, match="not a text file"):
+        load_yaml(path)
+    with pytest.raises(ConfigError, match="is a folder"):
+        read_text_file(tmp_path, "config file")
+
+
+@pytest.mark.parametrize("pair", [[3, 0], [0, 3], [-1, 1], [1, -1]])
+def test_removed_blocks_outside_the_grid(pair):
+    with pytest.raises(ConfigError, match="removed_blocks entry .* outside the 3 x 3 grid"):
+        pes.EnvConfig(removed_blocks=[pair]).validate()
+    # on a layout that is not the grid the key plays no part
+    pes.EnvConfig(removed_blocks=[pair], layout="empty").validate()
+
+
+# --- 2. NaN/inf and typos in EnvConfig ------------------------------------------------------------
+
+
+def float_fields() -> list[str]:
+    hints = typing.get_type_hints(pes.EnvConfig)
+    return [f.name for f in dataclasses.fields(pes.EnvConfig) if hints[f.name] is float]
+
+
+@pytest.mark.parametrize("name", float_fields())
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_every_float_field_rejects_nan_and_inf(name, bad):
+    with pytest.raises(ConfigError, match=name) as error:
+        pes.EnvConfig.from_dict({name: bad})
+    assert "\n" not in str(error.value)
+    with pytest.raises(ConfigError, match=name):
+        pes.EnvConfig(**{name: bad}).validate()
+
+
+@pytest.mark.parametrize("name", ["pursuer_inertia", "evader_inertia", "building_height_range"])
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_tuple_fields_reject_nan_and_inf(name, bad):
+    value = list(getattr(pes.EnvConfig(), name))
+    value[-1] = bad
+    with pytest.raises(ConfigError, match=name):
+        pes.EnvConfig.from_dict({name: value})
+
+
+def test_typo_keyword_is_a_config_error():
+    with pytest.raises(ConfigError, match="did you mean 'num_pursuers'"):
+        pes.EnvConfig(num_pursers=5)
+    with pytest.raises(ConfigError, match="positional"):
+        pes.EnvConfig(*range(100))
+    with pytest.raises(ConfigError, match="two values for 'num_pursuers'"):
+        pes.EnvConfig(5, num_pursuers=4)
+    # valid keywords and positional values still build the same dataclass
+    assert pes.EnvConfig(4) == pes.EnvConfig(num_pursuers=4)
+    assert pes.EnvConfig(num_pursuers=4, capture_count=2).replace(max_steps=9).max_steps == 9
+    assert "num_pursuers" in inspect.signature(pes.EnvConfig).parameters
+
+
+def test_validate_checks_types_of_a_constructed_config():
+    with pytest.raises(ConfigError, match="grid_rows: expected an integer"):
+        pes.EnvConfig(grid_rows="3").validate()

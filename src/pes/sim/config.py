@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pes.config import from_dict, load_yaml, parse_override
+from pes.config import check_types, from_dict, load_yaml, parse_override, strict_keywords
 from pes.errors import ConfigError
 
 Dynamics = Literal["quadrotor", "point_mass"]
@@ -42,6 +42,7 @@ REWARD_KEYS = (
 (:meth:`EnvConfig.for_evaluation`) resets them to the paper's values."""
 
 
+@strict_keywords
 @dataclass
 class EnvConfig:
     """The pursuit-evasion scenario. Build with ``EnvConfig(...)``, ``EnvConfig.from_dict`` or
@@ -216,6 +217,7 @@ class EnvConfig:
 
     def validate(self) -> EnvConfig:
         """Raise :class:`ConfigError` if any setting is impossible; return ``self``."""
+        check_types(self)  # the constructor accepts anything; a typed value is checked here
         positive = [
             "arena_width",
             "arena_height",
@@ -302,7 +304,24 @@ class EnvConfig:
             raise ConfigError(f"building_height_range must be 0 < low <= high, got {[low, high]}")
         for pair in self.removed_blocks:
             if len(pair) != 2:
-                raise ConfigError(f"removed_blocks entries must be [row, col], got {pair!r}")
+                raise ConfigError(f"removed_blocks entries must be [row, col], got {list(pair)!r}")
+            row, col = pair
+            if self.layout == "grid" and not (
+                0 <= row < self.grid_rows and 0 <= col < self.grid_cols
+            ):
+                raise ConfigError(
+                    f"removed_blocks entry {list(pair)!r} lies outside the {self.grid_rows} x "
+                    f"{self.grid_cols} grid (rows 0..{self.grid_rows - 1}, cols "
+                    f"0..{self.grid_cols - 1})"
+                )
+        # Every other number must be finite too: NaN passes every comparison above it is not in.
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            values = value if isinstance(value, tuple) else (value,)
+            for item in values:
+                if isinstance(item, float) and not math.isfinite(item):
+                    what = "hold finite numbers" if isinstance(value, tuple) else "be a finite number"
+                    raise ConfigError(f"{f.name} must {what}, got {value!r}")
         substep = self.dt / self.physics_substeps
         if substep * self.attitude_bandwidth > 0.5:
             raise ConfigError(
