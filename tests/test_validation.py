@@ -10,11 +10,12 @@ import typing
 
 import numpy as np
 import pytest
+import torch
 
 import pes
 from pes.cli import main
 from pes.config import load_yaml, read_text_file
-from pes.errors import ConfigError
+from pes.errors import ActionError, ConfigError
 from pes.sim.layout import Layout
 
 
@@ -167,3 +168,62 @@ def test_typo_keyword_is_a_config_error():
 def test_validate_checks_types_of_a_constructed_config():
     with pytest.raises(ConfigError, match="grid_rows: expected an integer"):
         pes.EnvConfig(grid_rows="3").validate()
+
+
+# --- 6. PettingZoo actions ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def zoo():
+    from pes.pettingzoo import parallel_env
+
+    env = parallel_env(num_pursuers=3, capture_count=2, max_steps=50)
+    env.reset(seed=0)
+    return env
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (np.zeros(3), "shape (2,), got (3,)"),
+        (np.zeros((1, 2)), "shape (2,), got (1, 2)"),
+        (0.5, "shape (2,), got ()"),
+        (np.float32(0.5), "shape (2,), got ()"),
+        ("ab", "got str"),
+        ("0.5", "got str"),
+        ([0.1, "x"], "must be numbers"),
+        ([True, False], "must be numbers"),
+        ([0.1, math.nan], "NaN or infinite"),
+        ([0.1, math.inf], "NaN or infinite"),
+        ([1e39, 0.0], "may not exceed"),
+        ({"x": 1}, "got dict"),
+        (None, "must be numbers"),
+    ],
+)
+def test_pettingzoo_bad_action_names_the_agent(zoo, bad, message):
+    actions = {agent: np.zeros(2, dtype=np.float32) for agent in zoo.agents}
+    actions["pursuer_1"] = bad
+    with pytest.raises(ActionError) as error:
+        zoo.step(actions)
+    text = str(error.value)
+    assert "pursuer_1" in text and message in text and "\n" not in text
+
+
+def test_pettingzoo_actions_must_be_a_dict(zoo):
+    with pytest.raises(ActionError, match="must be a dict of agent name to action, got list"):
+        zoo.step([np.zeros(2)] * 3)
+    with pytest.raises(ActionError, match="unknown agent 7"):
+        zoo.step({7: np.zeros(2), **{a: np.zeros(2) for a in zoo.agents}})
+    # a good step still runs, also with a list or a tensor per agent
+    _, rewards, *_ = zoo.step({a: [0.1, -0.2] for a in zoo.agents})
+    assert set(rewards) <= set(zoo.possible_agents)
+
+
+def test_step_rejects_huge_actions():
+    env = pes.make_env(num_envs=2, seed=0)
+    env.reset()
+    with pytest.raises(ActionError, match="beyond 1e"):
+        env.step(torch.full((2, 5, 2), 1e30))
+    with pytest.raises(ActionError, match="NaN or infinite"):
+        env.step(torch.full((2, 5, 2), math.nan))
+    env.step(torch.full((2, 5, 2), 3.0))  # beyond norm 1 is clipped, as documented
