@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 import math
+import re
 import typing
 
 import numpy as np
@@ -15,7 +17,8 @@ import torch
 import pes
 from pes.cli import main
 from pes.config import load_yaml, read_text_file
-from pes.errors import ActionError, ConfigError
+from pes.errors import ActionError, CheckpointError, ConfigError
+from pes.record import check_record, load_record
 from pes.sim.layout import Layout
 
 
@@ -227,3 +230,106 @@ def test_step_rejects_huge_actions():
     with pytest.raises(ActionError, match="NaN or infinite"):
         env.step(torch.full((2, 5, 2), math.nan))
     env.step(torch.full((2, 5, 2), 3.0))  # beyond norm 1 is clipped, as documented
+
+
+# --- 3. episode records: one validator for `pes view` and `pes render --record` ---------------
+
+
+def minimal_record() -> dict:
+    """A hand-made record of two pursuers and an evader."""
+    frame = {
+        "t": 0.0,
+        "pos": [[10.0, 10.0], [20.0, 10.0], [15.0, 15.0]],
+        "vel": [[0.0, 0.0]] * 3,
+        "alive": [True, True],
+        "crashed": [False, False],
+    }
+    return {
+        "version": 1,
+        "config": {"capture_count": 2},
+        "arena": [50.0, 40.0],
+        "buildings": [[30.0, 20.0, 40.0, 30.0]],
+        "dt": 0.1,
+        "agents": [
+            {"id": "pursuer_0", "role": "pursuer"},
+            {"id": "pursuer_1", "role": "pursuer"},
+            {"id": "evader", "role": "evader"},
+        ],
+        "frames": [frame, dict(frame, t=0.1)],
+        "outcome": {"success": False, "steps": 1, "crashes": 0},
+    }
+
+
+def spoil(path: str, value):
+    """A copy of the minimal record with the part at ``path`` (keys and indices split by
+    '/') set to ``value``, or cut to its first element when ``value`` is ``CUT``."""
+    record = json.loads(json.dumps(minimal_record()))
+    *parents, last = [int(p) if p.isdigit() else p for p in path.split("/")]
+    target = record
+    for key in parents:
+        target = target[key]
+    target[last] = target[last][:1] if value is CUT else value
+    return record
+
+
+CUT = object()
+BAD_RECORDS = [
+    ("frames/1/pos/2/0", math.nan, "frame 1: pos[2]"),
+    ("frames/1/pos/0/1", math.inf, "frame 1: pos[0]"),
+    ("frames/0/pos", CUT, "frame 0: pos must be a list of 3"),
+    ("frames/0/pos", "here", "frame 0: pos"),
+    ("frames/0/pos/1", [1.0, 2.0, 3.0], "frame 0: pos[1] must be [x, y]"),
+    ("frames/0/pos/1/0", "1.0", "frame 0: pos[1]"),
+    ("frames/0/vel", CUT, "frame 0: vel"),
+    ("frames/1/alive", [True], "frame 1: alive"),
+    ("frames/1/alive", ["yes", "no"], "frame 1: alive"),
+    ("frames/1/t", "soon", "frame 1: t"),
+    ("frames/1/pred", [[1.0]], "frame 1: pred[0]"),
+    ("frames/1", [1, 2], "frame 1"),
+    ("frames", [], "no frames"),
+    ("frames", {"0": 1}, "frames"),
+    ("arena", [50.0, math.nan], "arena"),
+    ("arena", "big", "arena"),
+    ("buildings/0", [1.0, 2.0, 3.0], "buildings[0]"),
+    ("buildings/0/2", math.nan, "buildings[0]"),
+    ("buildings", 5, "buildings"),
+    ("dt", -0.1, "dt"),
+    ("dt", "0.1", "dt"),
+    ("agents", 5, "agents"),
+    ("agents/2/role", "pursuer", "agents"),
+    ("config", [1], "config"),
+    ("outcome", {"success": True}, "outcome"),
+    ("outcome/steps", 1.5, "outcome.steps"),
+    ("outcome/success", "no", "outcome.success"),
+    ("version", [1], "version"),
+]
+
+
+@pytest.mark.parametrize("path, value, message", BAD_RECORDS)
+def test_bad_record_is_one_line_in_view_and_render(tmp_path, capsys, path, value, message):
+    record_path = tmp_path / "ep.json"
+    record_path.write_text(json.dumps(spoil(path, value)))  # NaN is written as NaN, as Python does
+    with pytest.raises(CheckpointError, match=re.escape(message)):
+        check_record(spoil(path, value))
+    for argv in (
+        ["view", str(record_path), "--out", str(tmp_path / "ep.html")],
+        ["render", "--record", str(record_path), "--out", str(tmp_path / "ep.png")],
+    ):
+        assert main(argv) == 2, argv
+        err = one_line_error(capsys)
+        assert err.startswith(f"error: {record_path}: ") and message in err
+
+
+def test_good_minimal_record_renders(tmp_path, capsys):
+    record_path = tmp_path / "ep.json"
+    record_path.write_text(json.dumps(minimal_record()))
+    assert check_record(load_record(record_path))["dt"] == 0.1
+    assert main(["render", "--record", str(record_path), "--out", str(tmp_path / "a.gif")]) == 0
+    assert main(["view", str(record_path)]) == 0
+
+
+def test_binary_record_file(tmp_path, capsys):
+    record_path = tmp_path / "ep.json"
+    record_path.write_bytes(BINARY)
+    assert main(["view", str(record_path)]) == 2
+    assert "not a JSON episode record" in one_line_error(capsys)

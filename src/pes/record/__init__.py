@@ -4,7 +4,13 @@ needs the ``onnx`` extra)."""
 
 from typing import Any
 
-from pes.record.episode import EpisodeRecorder, load_record, record_episode, save_record
+from pes.record.episode import (
+    EpisodeRecorder,
+    check_record,
+    load_record,
+    record_episode,
+    save_record,
+)
 from pes.record.render import render_frames, save_gif, save_mp4
 from pes.record.viewer import build_page, write_page
 
@@ -21,6 +27,7 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "EpisodeRecorder",
     "build_page",
+    "check_record",
     "load_record",
     "plot_trajectories",
     "record_episode",

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from pes.errors import CheckpointError, ConfigError
-from pes.record.episode import load_record
+from pes.record.episode import check_record, load_record
 
 DEFAULT_BUILDING_HEIGHT = 30.0
 """Building height (m) when the record has neither heights nor a height range."""
@@ -61,6 +61,7 @@ def scene_data(record: dict[str, Any], title: str = "episode") -> dict[str, Any]
     crashed, or None), ``outcome`` and ``scenario`` (a few config values for the caption).
     Raises :class:`CheckpointError` for a record whose parts are missing or do not fit together.
     """
+    check_record(record)
     try:
         return _scene_data(record, title)
     except (TypeError, KeyError, ValueError, IndexError, AttributeError) as exc:
