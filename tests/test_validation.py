@@ -9,6 +9,7 @@ import json
 import math
 import re
 import typing
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ import pes
 from pes.cli import main
 from pes.config import load_yaml, read_text_file
 from pes.errors import ActionError, CheckpointError, ConfigError
+from pes.paths import prepare_output, prepare_output_dir
 from pes.record import check_record, load_record
 from pes.sim.layout import Layout
 
@@ -333,3 +335,46 @@ def test_binary_record_file(tmp_path, capsys):
     record_path.write_bytes(BINARY)
     assert main(["view", str(record_path)]) == 2
     assert "not a JSON episode record" in one_line_error(capsys)
+
+
+# --- 4. output paths ---------------------------------------------------------------------------
+
+
+@pytest.fixture()
+def a_file(tmp_path) -> Path:
+    path = tmp_path / "ep.json"
+    path.write_text(json.dumps(minimal_record()))
+    return path
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["render", "--policy", "pid-pf", "--out", "{file}/sub.json"], "is a file, not a folder"),
+        (["render", "--policy", "pid-pf", "--out", "/proc/x/y.gif"], "cannot write /proc/x/y.gif"),
+        (["render", "--policy", "pid-pf", "--out", "/proc/y.png"], "cannot write /proc/y.png"),
+        (["render", "--record", "{file}", "--out", "{file}/a/b.gif"], "is a file, not a folder"),
+        (["render", "--record", "{file}", "--out", "{tmp}/dir.png"], "it is a folder"),
+        (["view", "{file}", "--out", "{file}/page.html"], "is a file, not a folder"),
+        (["view", "{file}", "--out", "/proc/x/page.html"], "cannot write /proc/x/page.html"),
+        (["demo", "--out", "{file}"], "it is a file, not a folder"),
+        (["demo", "--out", "{file}/run"], "is a file, not a folder"),
+        (["demo", "--out", "/proc/x"], "cannot write"),
+        (["export-onnx", "cbc-tp", "{file}/policy.onnx"], "is a file, not a folder"),
+        (["export-onnx", "cbc-tp", "/proc/x/policy.onnx"], "cannot write /proc/x/policy.onnx"),
+    ],
+)
+def test_unwritable_output_is_one_line(argv, message, a_file, tmp_path, capsys):
+    (tmp_path / "dir.png").mkdir()  # a folder where a file is asked for
+    argv = [a.format(file=a_file, tmp=tmp_path) for a in argv]
+    assert main(argv) == 2
+    err = one_line_error(capsys)
+    assert err.startswith("error: ") and message in err
+
+
+def test_prepare_output_creates_the_folder(tmp_path):
+    path = prepare_output(tmp_path / "a" / "b" / "c.json")
+    assert path.parent.is_dir() and not path.exists()
+    assert prepare_output_dir(tmp_path / "d" / "e").is_dir()
+    with pytest.raises(ConfigError, match="is a folder"):
+        prepare_output(tmp_path / "a")

@@ -18,6 +18,7 @@ from typing import Any, NoReturn
 from pes import __version__
 from pes.config import load_yaml, parse_override
 from pes.errors import ConfigError, PESError
+from pes.paths import prepare_output, prepare_output_dir
 from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
 
@@ -163,7 +164,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     config = _scenario(args, disturbance=True, crash_mode="disable", **_opponent())
     if args.policy is None:
         args.policy = "cbc-tp" if is_shipped("cbc-tp") else "pid-pf"
-    out = Path(args.out)
+    out = prepare_output_dir(args.out)
     record = _run_episode(config, args.policy, args.seed)
     record_path = save_record(record, out / "episode.json")
     gif_path = save_gif(record, out / "episode.gif", every=2)
@@ -243,6 +244,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     }
     if suffix not in writers:
         raise ConfigError(f"--out must end in .gif, .mp4, .png or .json, got '{out.name}'")
+    prepare_output(out)  # before any episode is run
     if args.record is not None:
         records = [load_record(args.record)]
     else:
@@ -360,6 +362,7 @@ def cmd_export_onnx(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".onnx":
         raise ConfigError(f"OUT must end in .onnx, got '{out.name}'")
+    prepare_output(out)
     summary = export_onnx(args.checkpoint, out, opset=args.opset, check=args.check)
     if args.json:
         _print_json(summary)

@@ -20,6 +20,7 @@ from typing import Any
 import torch
 
 from pes.errors import CheckpointError
+from pes.paths import prepare_output
 from pes.sim.config import EnvConfig
 from pes.sim.env import PursuitEvasionEnv, make_env
 
@@ -171,8 +172,7 @@ def record_episode(policy, config: EnvConfig, seed: int = 0, device: str = "cpu"
 
 def save_record(record: dict[str, Any], path: str | Path) -> Path:
     """Write ``record`` as JSON to ``path`` (parents created)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = prepare_output(path)
     path.write_text(json.dumps(record, separators=(",", ":")))
     return path
 
