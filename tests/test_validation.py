@@ -378,3 +378,28 @@ def test_prepare_output_creates_the_folder(tmp_path):
     assert prepare_output_dir(tmp_path / "d" / "e").is_dir()
     with pytest.raises(ConfigError, match="is a folder"):
         prepare_output(tmp_path / "a")
+
+
+# --- 5. ONNX export of a policy with NaN weights -----------------------------------------------
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_export_onnx_rejects_non_finite_weights(tmp_path, capsys, bad):
+    pytest.importorskip("onnx")
+    pytest.importorskip("onnxscript")
+    from pes.algos.io import is_shipped
+
+    if not is_shipped("cbc-tp"):
+        pytest.skip("no shipped cbc-tp policy")
+    shipped = Path(pes.__file__).parent / "models" / "cbc_tp.pt"
+    blob = torch.load(shipped, map_location="cpu", weights_only=False)
+    actor = blob["policy"]["actor"]
+    name = next(k for k, v in actor.items() if torch.is_tensor(v) and v.is_floating_point())
+    actor[name] = torch.full_like(actor[name], bad)
+    path = tmp_path / "broken.pt"
+    torch.save(blob, path)
+    out = tmp_path / "broken.onnx"
+    assert main(["export-onnx", str(path), str(out), "--json"]) == 2
+    err = one_line_error(capsys)
+    assert "NaN or infinite weights" in err and not out.exists()
+    assert capsys.readouterr().out == ""  # no JSON with NaN in it

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -17,7 +18,7 @@ from typing import Any, NoReturn
 
 from pes import __version__
 from pes.config import load_yaml, parse_override
-from pes.errors import ConfigError, PESError
+from pes.errors import CheckpointError, ConfigError, PESError
 from pes.paths import prepare_output, prepare_output_dir
 from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
@@ -364,6 +365,12 @@ def cmd_export_onnx(args: argparse.Namespace) -> int:
         raise ConfigError(f"OUT must end in .onnx, got '{out.name}'")
     prepare_output(out)
     summary = export_onnx(args.checkpoint, out, opset=args.opset, check=args.check)
+    error = summary.get("max_abs_error")
+    if error is not None and not math.isfinite(error):
+        raise CheckpointError(
+            f"onnxruntime's actions from {out} are not finite (max abs error {error}): "
+            "the exported graph does not compute the policy"
+        )
     if args.json:
         _print_json(summary)
     else:

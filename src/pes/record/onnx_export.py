@@ -99,6 +99,19 @@ def load_exportable(spec: str | Path) -> tuple[ExportablePolicy, Any]:
         raise CheckpointError(f"'{spec}' does not hold a CBC actor")
     model = ExportablePolicy(policy.actor, policy.tp).eval()
     model.requires_grad_(False)
+    # A diverged training run can save NaN or infinite weights: its graph would compute NaN.
+    tensors = list(model.named_parameters()) + list(model.named_buffers())
+    broken = [
+        name
+        for name, tensor in tensors
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())
+    ]
+    if broken:
+        more = f" and {len(broken) - 1} more" if len(broken) > 1 else ""
+        raise CheckpointError(
+            f"'{spec}' holds NaN or infinite weights ({broken[0]}{more}): "
+            "the policy cannot be exported"
+        )
     return model, cfg
 
 
