@@ -403,3 +403,19 @@ def test_export_onnx_rejects_non_finite_weights(tmp_path, capsys, bad):
     err = one_line_error(capsys)
     assert "NaN or infinite weights" in err and not out.exists()
     assert capsys.readouterr().out == ""  # no JSON with NaN in it
+
+
+@pytest.mark.parametrize(
+    "name, value",
+    [
+        ("arena_width", 1e9),
+        ("arena_height", 1e5),
+        ("grid_rows", 10**6),
+        ("physics_substeps", 10**9),
+        ("history_length", 10**9),
+        ("num_pursuers", 1000),
+    ],
+)
+def test_sizes_that_would_exhaust_memory_or_hang(name, value):
+    with pytest.raises(ConfigError, match=f"{name} must be at most"):
+        pes.EnvConfig.from_dict({name: value})

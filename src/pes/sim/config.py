@@ -23,6 +23,10 @@ SHIPPED_EVADERS = ("evader-ddpg-paper", "evader-ddpg")
 paper's (PID(PF) captures it about as often as the paper's PID(PF) caught its evader, 27.3 %)
 and the fully trained one (docs/algorithms/evader_ddpg.md)."""
 
+MAX_ARENA = 1000.0
+"""Largest arena side (m) that ``validate`` accepts (the start regions are found on a grid of
+0.5 m cells)."""
+
 REWARD_KEYS = (
     "cooperation_weight",
     "self_weight",
@@ -277,8 +281,20 @@ class EnvConfig:
         for name in positive_ints:
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.num_pursuers > 256:
-            raise ConfigError(f"num_pursuers must be at most 256, got {self.num_pursuers}")
+        # Bounds on what is allocated or looped over per environment: far beyond them a typo
+        # would exhaust memory or hang rather than fail.
+        limits = {
+            "num_pursuers": 256,
+            "arena_width": MAX_ARENA,  # the start regions are a grid of 0.5 m cells
+            "arena_height": MAX_ARENA,
+            "grid_rows": 100,
+            "grid_cols": 100,
+            "physics_substeps": 1000,
+            "history_length": 10_000,
+        }
+        for name, limit in limits.items():
+            if getattr(self, name) > limit:
+                raise ConfigError(f"{name} must be at most {limit:g}, got {getattr(self, name)}")
         if self.capture_count > self.num_pursuers:
             raise ConfigError(
                 f"capture_count ({self.capture_count}) is above num_pursuers "
