@@ -217,8 +217,9 @@ def _finite(value: Any, where: str, positive: bool = False) -> float:
     return float(value)
 
 
-def _points(value: Any, where: str, count: int | None) -> None:
-    """A list of ``count`` (any number if None) [x, y] pairs of finite numbers."""
+def _points(value: Any, where: str, count: int | None, arena: list[float] | None = None) -> None:
+    """A list of ``count`` (any number if None) [x, y] pairs of finite numbers; with ``arena``
+    [width, height], no farther outside it than its own size (so that a picture can hold it)."""
     shape = f"a list of {count} [x, y] pairs" if count is not None else "a list of [x, y] pairs"
     if not isinstance(value, list) or (count is not None and len(value) != count):
         raise _bad(where, shape, value)
@@ -227,6 +228,8 @@ def _points(value: Any, where: str, count: int | None) -> None:
             raise _bad(f"{where}[{i}]", "[x, y]", point)
         for v in point:
             _finite(v, f"{where}[{i}]")
+        if arena is not None and not all(-size <= v <= 2 * size for v, size in zip(point, arena)):
+            raise _bad(f"{where}[{i}]", "inside the arena (or near it)", point)
 
 
 def _flags(value: Any, where: str, count: int) -> None:
@@ -254,8 +257,26 @@ def check_record(record: Any) -> dict[str, Any]:
             f"episode record version {_show(record['version'])}, this PES reads version "
             f"{RECORD_VERSION}"
         )
-    if not isinstance(record["config"], dict):
-        raise _bad("config", "a mapping", record["config"])
+    config = record["config"]
+    if not isinstance(config, dict):
+        raise _bad("config", "a mapping", config)
+    # The few config values that the viewer and the renderer read, where present.
+    for key in ("altitude", "altitude_step"):
+        if config.get(key) is not None:
+            _finite(config[key], f"config.{key}")
+    for key in ("capture_radius", "body_radius"):
+        if config.get(key) is not None:
+            _finite(config[key], f"config.{key}", positive=True)
+    if config.get("capture_count") is not None:
+        count = config["capture_count"]
+        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+            raise _bad("config.capture_count", "a whole number >= 1", count)
+    if config.get("building_height_range") is not None:
+        span = config["building_height_range"]
+        if not isinstance(span, list) or len(span) != 2:
+            raise _bad("config.building_height_range", "[low, high]", span)
+        for v in span:
+            _finite(v, "config.building_height_range", positive=True)
     agents = record["agents"]
     if not isinstance(agents, list) or not all(
         isinstance(a, dict) and isinstance(a.get("id"), str) for a in agents
@@ -268,8 +289,7 @@ def check_record(record: Any) -> dict[str, Any]:
     arena = record["arena"]
     if not isinstance(arena, list) or len(arena) != 2:
         raise _bad("arena", "[width, height]", arena)
-    for v in arena:
-        _finite(v, "arena", positive=True)
+    arena = [_finite(v, "arena", positive=True) for v in arena]
     buildings = record["buildings"]
     if not isinstance(buildings, list):
         raise _bad("buildings", "a list of [xmin, ymin, xmax, ymax]", buildings)
@@ -307,7 +327,7 @@ def check_record(record: Any) -> dict[str, Any]:
         for key in ("pos", "alive"):
             if key not in frame:
                 raise CheckpointError(f"episode record: {where} lacks '{key}'")
-        _points(frame["pos"], f"{where}: pos", n + 1)
+        _points(frame["pos"], f"{where}: pos", n + 1, arena)
         if frame.get("vel") is not None:
             _points(frame["vel"], f"{where}: vel", n + 1)
         _flags(frame["alive"], f"{where}: alive", n)
@@ -316,7 +336,7 @@ def check_record(record: Any) -> dict[str, Any]:
         if "t" in frame:
             _finite(frame["t"], f"{where}: t")
         if frame.get("pred") is not None:
-            _points(frame["pred"], f"{where}: pred", None)
+            _points(frame["pred"], f"{where}: pred", None, arena)
     outcome = record["outcome"]
     if not isinstance(outcome, dict) or not {"success", "steps", "crashes"} <= set(outcome):
         raise _bad("outcome", "an object with success, steps and crashes", outcome)

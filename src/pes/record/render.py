@@ -36,8 +36,9 @@ class _View:
 
     def __init__(self, arena: list[float], size: int, header: int) -> None:
         self.scale = size / max(arena)
-        self.width = int(round(arena[0] * self.scale))
-        self.height = int(round(arena[1] * self.scale))
+        # at least 2 pixels each way, however narrow the arena (the border needs them)
+        self.width = max(2, int(round(arena[0] * self.scale)))
+        self.height = max(2, int(round(arena[1] * self.scale)))
         self.header = header
 
     def point(self, x: float, y: float) -> tuple[float, float]:

@@ -336,7 +336,8 @@ class EnvConfig:
             values = value if isinstance(value, tuple) else (value,)
             for item in values:
                 if isinstance(item, float) and not math.isfinite(item):
-                    what = "hold finite numbers" if isinstance(value, tuple) else "be a finite number"
+                    many = isinstance(value, tuple)
+                    what = "hold finite numbers" if many else "be a finite number"
                     raise ConfigError(f"{f.name} must {what}, got {value!r}")
         substep = self.dt / self.physics_substeps
         if substep * self.attitude_bandwidth > 0.5:

@@ -234,6 +234,8 @@ class PursuitEvasionEnv:
             raise ActionError(f"{name} must have shape {list(shape)}, got {list(actions.shape)}")
         if not actions.is_floating_point():
             raise ActionError(f"{name} must be floating point, got {actions.dtype}")
+        # Checked in float32, as used (in float16 the limit itself would be infinite).
+        actions = actions.to(device=self.device, dtype=torch.float32)
         # One reduction in the common case: NaN fails the comparison too.
         if self.check_actions and not bool((actions.abs() <= ACTION_LIMIT).all()):
             if not bool(torch.isfinite(actions).all()):
@@ -243,7 +245,6 @@ class PursuitEvasionEnv:
                 f"{name} hold values beyond {ACTION_LIMIT:g}: actions are fractions of the "
                 "maximum acceleration, in [-1, 1] (clipped to norm 1)"
             )
-        actions = actions.to(device=self.device, dtype=torch.float32)
         return actions
 
     # --- state access, for recorders and tests -------------------------------------------------
