@@ -203,6 +203,9 @@ def zoo():
         ([1e39, 0.0], "may not exceed"),
         ({"x": 1}, "got dict"),
         (None, "must be numbers"),
+        (torch.tensor([True, False]), "real numbers"),
+        (torch.zeros(2, dtype=torch.complex64), "real numbers"),
+        (torch.full((2,), math.nan, dtype=torch.bfloat16), "NaN or infinite"),
     ],
 )
 def test_pettingzoo_bad_action_names_the_agent(zoo, bad, message):
@@ -222,6 +225,7 @@ def test_pettingzoo_actions_must_be_a_dict(zoo):
     # a good step still runs, also with a list or a tensor per agent
     _, rewards, *_ = zoo.step({a: [0.1, -0.2] for a in zoo.agents})
     assert set(rewards) <= set(zoo.possible_agents)
+    zoo.step({a: torch.tensor([0.1, 0.2], dtype=torch.bfloat16) for a in zoo.agents})
 
 
 def test_step_rejects_huge_actions():

@@ -183,7 +183,9 @@ def _agent_action(agent: str, action: Any) -> np.ndarray:
     """``action`` as a finite float32 array of shape (2,), or an :class:`ActionError` naming
     ``agent``: no broadcasting of a scalar, no reading of strings as numbers."""
     if isinstance(action, torch.Tensor):
-        action = action.detach().cpu().numpy()
+        if action.dtype == torch.bool or action.is_complex():
+            raise ActionError(f"action of {agent} must be real numbers, got {action.dtype}")
+        action = action.detach().to("cpu", torch.float64).numpy()  # also bfloat16
     if isinstance(action, (str, bytes, dict)):
         raise ActionError(
             f"action of {agent} must be 2 numbers (array of shape (2,)), got "

@@ -69,7 +69,9 @@ STREAM_DISTURBANCE = 4
 
 SPAWN_CELL = 0.5  # m, resolution of the grid of free start cells
 CONTACT_GAP = 1e-3  # m, how far outside the body radius a pushed-out vehicle is put
-CONTACT_PASSES = 2  # passes of resolve_contacts after the push out of the nearest obstacle
+CONTACT_PASSES = 1  # passes of resolve_contacts after the push out of the nearest obstacle (one
+# leaves orthogonal pairs -- the corners of walls and blocks -- together; more only matter where
+# obstacles stand closer than a body diameter, where no free spot need exist)
 ROADMAP_CLEARANCE = 0.7  # m beyond the body radius: the waypoints round building corners
 
 
@@ -422,11 +424,11 @@ def resolve_contacts(
     dists: Tensor,
     nxs: Tensor,
     nys: Tensor,
-    is_pursuer: Tensor,
     radius: float,
 ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
-    """Push vehicles (E, A) out of every wall and building still within ``radius`` of their
-    centre, all obstacles at once, in :data:`CONTACT_PASSES` passes.
+    """Push vehicles (E, A) -- pursuers, then the evader last -- out of every wall and
+    building still within ``radius`` of their centre, all obstacles at once, in
+    :data:`CONTACT_PASSES` passes.
 
     ``dists`` (E, A, K) are the signed distances of the K obstacles from (x, y) and ``nxs``,
     ``nys`` their outward normals (:func:`obstacle_distances_xy`, possibly measured before a
@@ -447,18 +449,22 @@ def resolve_contacts(
         dx, dy = _per_axis(nxs * push), _per_axis(nys * push)
         x, y = x + dx, y + dy
         dists = dists + nxs * dx.unsqueeze(-1) + nys * dy.unsqueeze(-1)
-        inward = torch.where(over, vx.unsqueeze(-1) * nxs + vy.unsqueeze(-1) * nys, 0.0)
-        inward = inward.clamp(max=0.0)
-        slide_x, slide_y = vx - _per_axis(inward * nxs), vy - _per_axis(inward * nys)
-        vx = torch.where(hit, torch.where(is_pursuer, 0.0, slide_x), vx)
-        vy = torch.where(hit, torch.where(is_pursuer, 0.0, slide_y), vy)
+        # The evader (last) slides: it loses its velocity into each obstacle it touches.
+        enx, eny = nxs[:, -1], nys[:, -1]  # (E, K)
+        inward = (vx[:, -1:] * enx + vy[:, -1:] * eny).clamp(max=0.0)
+        inward = torch.where(over[:, -1], inward, 0.0)
+        slide_x = vx[:, -1] - _per_axis(inward * enx)
+        slide_y = vy[:, -1] - _per_axis(inward * eny)
+        # Pursuers stop.
+        vx = torch.where(hit, torch.cat([torch.zeros_like(vx[:, :-1]), slide_x[:, None]], 1), vx)
+        vy = torch.where(hit, torch.cat([torch.zeros_like(vy[:, :-1]), slide_y[:, None]], 1), vy)
         touched = touched | hit
     return x, y, vx, vy, dists, touched
 
 
 def _per_axis(moves: Tensor) -> Tensor:
     """Combine (..., K) moves along one axis: the largest one each way, (...)."""
-    return moves.clamp(min=0.0).amax(-1) + moves.clamp(max=0.0).amin(-1)
+    return moves.amax(-1).clamp(min=0.0) + moves.amin(-1).clamp(max=0.0)
 
 
 def advance(
@@ -523,9 +529,7 @@ def advance(
     # That push leaves the nearest obstacle only: in a corner (two walls, a wall and a building,
     # two buildings) the others may still hold the body. Leave them all.
     dists = dists + nxs * (nx * push).unsqueeze(-1) + nys * (ny * push).unsqueeze(-1)
-    x, y, vx, vy, dists, touched = resolve_contacts(
-        x, y, vx, vy, dists, nxs, nys, is_pursuer, cfg.body_radius
-    )
+    x, y, vx, vy, dists, touched = resolve_contacts(x, y, vx, vy, dists, nxs, nys, cfg.body_radius)
     contact = contact | touched
     crashed = contact[:, :n] & alive0
     again, anx, any_ = pick_nearest(dists, nxs, nys, sc.boxes.shape[0])
