@@ -24,8 +24,7 @@ from pathlib import Path
 
 import torch
 
-from pes.algos import ALGOS
-from pes.algos.config import build_train_config
+from pes.algos import ALGOS, build_train_config
 from pes.sim.bench import machine_info
 from pes.sim.env import make_env, resolve_device
 
@@ -33,7 +32,7 @@ from pes.sim.env import make_env, resolve_device
 def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
     # The learner's own acting and updates: without this, the quick preset's PID(PF)
     # demonstrations (its first 100,000 transitions) would play through the timed window.
-    cfg = build_train_config(algo, preset, {"device": device, "demo_policy": ""})
+    cfg = build_train_config(algo, preset, {"device": device, "protocol.demonstrations": None})
     env_cfg = ALGOS[algo].adapt_env(cfg.env_config())
     torch.manual_seed(0)
     learner = ALGOS[algo](cfg, env_cfg, torch.device(device))
@@ -50,7 +49,8 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
             learner.record(info, actions, evader, reward, terminated, info2)
             obs, info = obs2, info2
 
-    need = max(cfg.warmup, cfg.batch_size, cfg.tp_batch_size) // cfg.num_envs + 20
+    lc = cfg.learner
+    need = max(lc.warmup, lc.batch_size, getattr(lc, "tp_batch_size", 0)) // cfg.num_envs + 20
     # Fill the buffer past the warm-up and play past the first episode end, so that the step
     # and the auto-reset pass are both compiled before the timed window.
     collect(max(need, env_cfg.max_steps + 5))

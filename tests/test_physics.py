@@ -369,3 +369,57 @@ def test_geodesic_metric_charges_the_path_round_a_building():
     assert evaluated.distance_metric == "euclidean"
     with pytest.raises(ConfigError, match="distance_metric"):
         pes.EnvConfig(distance_metric="manhattan").validate()
+
+
+def _rollout_clearance(num_envs: int, steps: int, seed: int = 0) -> tuple[float, int]:
+    """Drive pursuers on random headings held 25 steps (so that they reach walls and corners)
+    with the disturbance on; return the smallest distance from an alive vehicle centre to any
+    wall or building over the rollout, less the body radius, and the number of contacts."""
+    from pes.sim.geometry import obstacle_distances_xy
+
+    cfg = pes.EnvConfig(disturbance=True)
+    env = pes.make_env(cfg, num_envs=num_envs, seed=seed)
+    env.reset(seed=seed)
+    boxes = torch.as_tensor(env.layout.boxes, dtype=torch.float32)
+    arena = torch.tensor([env.layout.width, env.layout.height])
+    gen = torch.Generator().manual_seed(seed)
+    worst, contacts = math.inf, 0
+    for t in range(steps):
+        if t % 25 == 0:
+            heading = torch.rand(num_envs, cfg.num_pursuers, 2, generator=gen) * 2 - 1
+        _, _, _, _, info = env.step(heading)
+        pos = info["positions"]  # after the step, before any auto-reset
+        dist = obstacle_distances_xy(pos[..., 0], pos[..., 1], boxes, arena)[0].amin(-1)
+        alive = torch.cat([info["alive"], torch.ones_like(info["alive"][:, :1])], dim=1)
+        worst = min(worst, float(dist[alive].min()) - cfg.body_radius)
+        contacts += int(info["crashed"].sum() + info["evader_contact"].sum())
+    return worst, contacts
+
+
+def test_no_centre_within_the_body_radius_of_any_obstacle():
+    """Collisions leave both walls of a corner and every building face at once (issue 30:
+    a pursuer sat at (0.138, 0.301) in a corner, centres ended up outside the arena)."""
+    worst, contacts = _rollout_clearance(64, 300)
+    assert contacts > 100  # the rollout does reach the walls
+    assert worst >= -1e-5, f"a centre {-worst:.4f} m inside the body radius"
+
+
+@pytest.mark.slow
+def test_no_centre_within_the_body_radius_of_any_obstacle_long():
+    worst, _ = _rollout_clearance(1024, 2000, seed=1)
+    assert worst >= -1e-5, f"a centre {-worst:.4f} m inside the body radius"
+
+
+def test_corner_contact_resolves_both_walls():
+    """A pursuer driven into the lower-left corner ends at the body radius from both walls."""
+    cfg = pes.EnvConfig(layout="empty", dynamics="point_mass", max_steps=400)
+    env = pes.make_env(cfg, seed=0)
+    env.reset(seed=0)
+    x0 = torch.tensor([[0.5, 50.0, 51.0, 52.0, 53.0, 70.0]])
+    set_vehicles(env, x=x0, y=torch.tensor([[0.5, 50.0, 50.0, 50.0, 50.0, 70.0]]))
+    for _ in range(30):
+        _, _, _, _, info = env.step(torch.tensor([[[-1.0, -1.0]] + [[0.0, 0.0]] * 4]))
+        x, y = info["positions"][0, 0].tolist()
+        assert x >= cfg.body_radius and y >= cfg.body_radius, (x, y)
+    assert x == pytest.approx(cfg.body_radius + 1e-3, abs=1e-5)
+    assert y == pytest.approx(cfg.body_radius + 1e-3, abs=1e-5)

@@ -9,19 +9,30 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from pes import __version__
 from pes.config import load_yaml, parse_override
-from pes.errors import ConfigError, PESError, TrainingInterruptedError
+from pes.errors import CheckpointError, ConfigError, PESError, TrainingInterruptedError
+from pes.paths import prepare_output, prepare_output_dir
 from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
 
 EXIT_USER_ERROR = 2
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose mistakes end in one line on stderr and exit status 2 (SPEC §5),
+    not argparse's usage block; ``--help`` still prints the full usage."""
+
+    def error(self, message: str) -> NoReturn:
+        text = " ".join(message.split())
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {text} (see '{self.prog} --help')\n")
 
 
 # --- shared options ------------------------------------------------------------------------
@@ -154,7 +165,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     config = _scenario(args, disturbance=True, crash_mode="disable", **_opponent())
     if args.policy is None:
         args.policy = "cbc-tp" if is_shipped("cbc-tp") else "pid-pf"
-    out = Path(args.out)
+    out = prepare_output_dir(args.out)
     record = _run_episode(config, args.policy, args.seed)
     record_path = save_record(record, out / "episode.json")
     gif_path = save_gif(record, out / "episode.gif", every=2)
@@ -234,6 +245,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     }
     if suffix not in writers:
         raise ConfigError(f"--out must end in .gif, .mp4, .png or .json, got '{out.name}'")
+    prepare_output(out)  # before any episode is run
     if args.record is not None:
         records = [load_record(args.record)]
     else:
@@ -353,7 +365,14 @@ def cmd_export_onnx(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".onnx":
         raise ConfigError(f"OUT must end in .onnx, got '{out.name}'")
+    prepare_output(out)
     summary = export_onnx(args.checkpoint, out, opset=args.opset, check=args.check)
+    error = summary.get("max_abs_error")
+    if error is not None and not math.isfinite(error):
+        raise CheckpointError(
+            f"onnxruntime's actions from {out} are not finite (max abs error {error}): "
+            "the exported graph does not compute the policy"
+        )
     if args.json:
         _print_json(summary)
     else:
@@ -408,12 +427,12 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="pes",
         description="PES: multi-quadcopter pursuit-evasion (Game of Drones, TNNLS 2022).",
     )
     parser.add_argument("--version", action="version", version=f"pes {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
 
     p = sub.add_parser(

@@ -18,6 +18,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import difflib
+import functools
 import inspect
 import math
 import re
@@ -123,6 +124,47 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
     raise ConfigError(f"{key}: expected {_type_name(hint)}, got {value!r}")
 
 
+def unknown_key(cls: type, key: object, names: list[str], label: str | None = None) -> ConfigError:
+    """The error for a key that is not a field of ``cls`` (called ``label`` in the message,
+    by default its class name), with the closest field suggested."""
+    close = difflib.get_close_matches(str(key), names, n=1)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    return ConfigError(f"unknown {label or cls.__name__} key '{key}'{hint}")
+
+
+def strict_keywords(cls: type[T]) -> type[T]:
+    """Class decorator for a config dataclass: its constructor raises :class:`ConfigError`
+    (naming the closest field) for an unknown keyword or too many positional values, where
+    Python would raise ``TypeError``. Valid calls behave exactly as the dataclass's own
+    ``__init__`` (which it wraps, keeping its signature for ``help`` and ``inspect``)."""
+    original = cls.__init__  # type: ignore[misc]
+    names = [f.name for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+
+    @functools.wraps(original)
+    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:  # noqa: N807
+        if len(args) > len(names):
+            raise ConfigError(
+                f"{cls.__name__} takes at most {len(names)} positional values, got {len(args)}"
+            )
+        for key in kwargs:
+            if key not in names:
+                raise unknown_key(cls, key, names)
+            if key in names[: len(args)]:
+                raise ConfigError(f"{cls.__name__} got two values for '{key}'")
+        original(self, *args, **kwargs)
+
+    cls.__init__ = __init__  # type: ignore[misc]
+    return cls
+
+
+def check_types(obj: Any) -> None:
+    """Check every field of the dataclass instance ``obj`` against its type hint (as
+    :func:`from_dict` does), raising :class:`ConfigError` naming the first ill-typed field."""
+    hints = typing.get_type_hints(type(obj))
+    for f in dataclasses.fields(obj):
+        _coerce(getattr(obj, f.name), hints[f.name], f.name)
+
+
 def from_dict(
     cls: type[T], values: dict[str, Any], *, base: T | None = None, label: str | None = None
 ) -> T:
@@ -139,9 +181,7 @@ def from_dict(
     names = [f.name for f in dataclasses.fields(cls) if f.init]
     for key in values:
         if key not in names:
-            close = difflib.get_close_matches(str(key), names, n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ConfigError(f"unknown {label} key '{key}'{hint}")
+            raise unknown_key(cls, key, names, label)
     checked = {key: _coerce(value, hints[key], key) for key, value in values.items()}
     obj = dataclasses.replace(base, **checked) if base is not None else cls(**checked)
     validate = getattr(obj, "validate", None)
@@ -172,13 +212,30 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
+def read_text_file(path: str | Path, what: str = "file") -> str:
+    """The text of ``path`` (UTF-8), or a one-line :class:`ConfigError` for a file that is
+    missing, unreadable or not text (a binary file passed by mistake)."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{what} not found: {path}") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{what} {path} is a folder, not a file") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a text file (is it the right {what}?)") from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+
+
 def load_yaml(path: str | Path) -> dict[str, Any]:
     """Read a YAML mapping from ``path`` with a clear error for a missing or malformed file."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
+    text = read_text_file(path, "config file")
     try:
-        data = _yaml_load(path.read_text()) or {}
+        data = _yaml_load(text) or {}
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
     if not isinstance(data, dict):

@@ -35,7 +35,7 @@ from pettingzoo import ParallelEnv
 
 from pes.errors import ActionError
 from pes.sim.config import EnvConfig
-from pes.sim.env import make_env
+from pes.sim.env import ACTION_LIMIT, make_env
 from pes.sim.scenario import OBS_FEATURES
 
 
@@ -91,15 +91,19 @@ class PESParallelEnv(ParallelEnv):
     def step(self, actions: dict[str, Any]):
         if not self.agents:
             raise ActionError("the episode is over: call reset()")
+        if not isinstance(actions, dict):
+            raise ActionError(
+                f"actions must be a dict of agent name to action, got {type(actions).__name__}"
+            )
+        for agent in actions:
+            if agent not in self._index:
+                raise ActionError(f"unknown agent {agent!r}")
         n = self.config.num_pursuers
         joint = np.zeros((1, n, 2), dtype=np.float32)
         for agent in self.agents:
             if agent not in actions:
                 raise ActionError(f"no action for live agent '{agent}'")
-            joint[0, self._index[agent]] = np.asarray(actions[agent], dtype=np.float32)
-        for agent in actions:
-            if agent not in self._index:
-                raise ActionError(f"unknown agent '{agent}'")
+            joint[0, self._index[agent]] = _agent_action(agent, actions[agent])
         _, reward, terminated, truncated, info = self._env.step(torch.from_numpy(joint))
         # The episode's last observation, not the next episode's first (the batched
         # environment resets itself).
@@ -173,3 +177,34 @@ class PESParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         self.agents = []
+
+
+def _agent_action(agent: str, action: Any) -> np.ndarray:
+    """``action`` as a finite float32 array of shape (2,), or an :class:`ActionError` naming
+    ``agent``: no broadcasting of a scalar, no reading of strings as numbers."""
+    if isinstance(action, torch.Tensor):
+        if action.dtype == torch.bool or action.is_complex():
+            raise ActionError(f"action of {agent} must be real numbers, got {action.dtype}")
+        action = action.detach().to("cpu", torch.float64).numpy()  # also bfloat16
+    if isinstance(action, (str, bytes, dict)):
+        raise ActionError(
+            f"action of {agent} must be 2 numbers (array of shape (2,)), got "
+            f"{type(action).__name__}"
+        )
+    try:
+        array = np.asarray(action)
+    except (TypeError, ValueError):
+        raise ActionError(f"action of {agent} must be an array of shape (2,)") from None
+    if array.dtype.kind not in "fiu":
+        raise ActionError(f"action of {agent} must be numbers, got dtype {array.dtype}")
+    if array.shape != (2,):
+        raise ActionError(f"action of {agent} must have shape (2,), got {array.shape}")
+    array = array.astype(np.float64)
+    if not np.all(np.isfinite(array)):
+        raise ActionError(f"action of {agent} holds NaN or infinite values: {array.tolist()}")
+    if np.any(np.abs(array) > ACTION_LIMIT):
+        raise ActionError(
+            f"action of {agent} is {array.tolist()}: actions are fractions of the maximum "
+            f"acceleration, in [-1, 1] (clipped to norm 1), and may not exceed {ACTION_LIMIT:g}"
+        )
+    return array.astype(np.float32)

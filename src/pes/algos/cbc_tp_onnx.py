@@ -44,7 +44,7 @@ INSTALL_HINT = "ONNX export needs the 'onnx' extra: pip install 'pes[onnx]'"
 
 def other_rows(num_pursuers: Tensor | int, device: torch.device | str = "cpu") -> Tensor:
     """(N, N) long: row k of pursuer i's observation shows pursuer ``rows[i, k]`` (itself, then
-    the others in increasing order), as :func:`pes.algos.features.other_index`, but built with
+    the others in increasing order), as :func:`pes.learn.features.other_index`, but built with
     tensor operations so that N stays symbolic in an exported graph."""
     ar = torch.arange(num_pursuers, device=device)
     i, k = ar[:, None], ar[None, :]
@@ -97,6 +97,19 @@ def load_exportable(spec: str | Path) -> tuple[ExportablePolicy, Any]:
         raise CheckpointError(f"'{spec}' does not hold a CBC actor")
     model = ExportablePolicy(policy.actor, getattr(policy, "tp", None)).eval()
     model.requires_grad_(False)
+    # A diverged training run can save NaN or infinite weights: its graph would compute NaN.
+    tensors = list(model.named_parameters()) + list(model.named_buffers())
+    broken = [
+        name
+        for name, tensor in tensors
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())
+    ]
+    if broken:
+        more = f" and {len(broken) - 1} more" if len(broken) > 1 else ""
+        raise CheckpointError(
+            f"'{spec}' holds NaN or infinite weights ({broken[0]}{more}): "
+            "the policy cannot be exported"
+        )
     return model, cfg
 
 

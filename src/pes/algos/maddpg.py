@@ -105,7 +105,7 @@ class CentralCritics(RowScaled):
     pursuer, or one shared that also reads the one-hot index i.
 
     The global state holds everything in the pursuers' observations (each is a function of it,
-    :func:`pes.algos.features.pursuer_obs`), so it stands for their concatenation."""
+    :func:`pes.learn.features.pursuer_obs`), so it stands for their concatenation."""
 
     def __init__(self, lc: MADDPGConfig, num_pursuers: int) -> None:
         super().__init__(0, lc.obstacle_scale, lc.target_scale)

@@ -3,7 +3,7 @@ on-policy, collected from ``num_envs`` environments at once.
 
 Each pursuer is an independent learner on its own Table I observation (IPPO): a Gaussian actor
 and a value function V(o_i), both MLPs on the flattened observation
-(:class:`pes.algos.nets.FlatObsMLP`). With ``shared=True`` (the default) all pursuers share
+(:class:`pes.learn.nets.FlatObsMLP`). With ``shared=True`` (the default) all pursuers share
 one actor and one value network, and every pursuer's samples train them (parameter sharing);
 ``shared=False`` gives each pursuer its own pair.
 

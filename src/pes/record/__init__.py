@@ -1,10 +1,16 @@
 """Looking at episodes: JSON records, top-down GIF/MP4 animations, trajectory plots, the 3-D
-browser replay (``pes view``), ONNX export of trained policies (:mod:`pes.record.onnx_export`,
+browser replay (``pes view``), ONNX export of trained policies (:mod:`pes.algos.cbc_tp_onnx`,
 needs the ``onnx`` extra)."""
 
 from typing import Any
 
-from pes.record.episode import EpisodeRecorder, load_record, record_episode, save_record
+from pes.record.episode import (
+    EpisodeRecorder,
+    check_record,
+    load_record,
+    record_episode,
+    save_record,
+)
 from pes.record.render import render_frames, save_gif, save_mp4
 from pes.record.viewer import build_page, write_page
 
@@ -21,6 +27,7 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "EpisodeRecorder",
     "build_page",
+    "check_record",
     "load_record",
     "plot_trajectories",
     "record_episode",

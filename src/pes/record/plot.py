@@ -20,6 +20,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
 from pes.errors import PESError
+from pes.paths import prepare_output
 
 BUILDING = "#6c757d"
 EVADER = "#d62728"
@@ -148,8 +149,7 @@ def plot_trajectories(
 def save_plot(record: dict[str, Any], path: str | Path, dpi: int = 150, **kwargs: Any) -> Path:
     """Write :func:`plot_trajectories` of ``record`` to ``path`` (PNG, or another format
     matplotlib knows by the suffix); ``kwargs`` go to :func:`plot_trajectories`."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = prepare_output(path)
     ax = plot_trajectories(record, **kwargs)
     ax.figure.savefig(path, dpi=dpi)
     return path

@@ -15,6 +15,7 @@ from typing import Any
 from PIL import Image, ImageDraw, ImageFont
 
 from pes.errors import PESError
+from pes.paths import prepare_output
 
 BACKGROUND = (236, 239, 242)
 BORDER = (52, 58, 64)
@@ -35,8 +36,9 @@ class _View:
 
     def __init__(self, arena: list[float], size: int, header: int) -> None:
         self.scale = size / max(arena)
-        self.width = int(round(arena[0] * self.scale))
-        self.height = int(round(arena[1] * self.scale))
+        # at least 2 pixels each way, however narrow the arena (the border needs them)
+        self.width = max(2, int(round(arena[0] * self.scale)))
+        self.height = max(2, int(round(arena[1] * self.scale)))
         self.header = header
 
     def point(self, x: float, y: float) -> tuple[float, float]:
@@ -126,8 +128,7 @@ def save_gif(
     record: dict[str, Any], path: str | Path, fps: int = 20, every: int = 1, size: int = 600
 ) -> Path:
     """Write the episode as an animated GIF at ``fps`` frames per second."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = prepare_output(path)
     images = list(render_frames(record, size=size, every=every))
     palette = [im.convert("P", palette=Image.Palette.ADAPTIVE, colors=64) for im in images]
     durations = [int(1000 / fps)] * len(palette)
@@ -158,8 +159,7 @@ def save_mp4(
     import imageio.v2 as imageio
     import numpy as np
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = prepare_output(path)
     writer = imageio.get_writer(
         path,
         format="FFMPEG",

@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from pes.errors import CheckpointError, ConfigError
-from pes.record.episode import load_record
+from pes.paths import prepare_output
+from pes.record.episode import check_record, load_record
 
 DEFAULT_BUILDING_HEIGHT = 30.0
 """Building height (m) when the record has neither heights nor a height range."""
@@ -61,6 +62,7 @@ def scene_data(record: dict[str, Any], title: str = "episode") -> dict[str, Any]
     crashed, or None), ``outcome`` and ``scenario`` (a few config values for the caption).
     Raises :class:`CheckpointError` for a record whose parts are missing or do not fit together.
     """
+    check_record(record)
     try:
         return _scene_data(record, title)
     except (TypeError, KeyError, ValueError, IndexError, AttributeError) as exc:
@@ -187,10 +189,10 @@ def write_page(record_path: str | Path, out: str | Path | None = None) -> tuple[
     out = Path(out) if out is not None else record_path.with_suffix(".html")
     if out.suffix.lower() not in (".html", ".htm"):
         raise ConfigError(f"--out must end in .html, got '{out.name}'")
+    prepare_output(out)
     try:
         page = build_page(record, title=record_path.name)
     except CheckpointError as exc:
         raise CheckpointError(f"{record_path}: {exc}") from None
-    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(page, encoding="utf-8")
     return out, record

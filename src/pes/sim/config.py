@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pes.config import from_dict, load_yaml, parse_override
+from pes.config import check_types, from_dict, load_yaml, parse_override, strict_keywords
 from pes.errors import ConfigError
 
 Dynamics = Literal["quadrotor", "point_mass"]
@@ -22,6 +22,10 @@ SHIPPED_EVADERS = ("evader-ddpg-paper", "evader-ddpg")
 """Names of the DDPG evaders shipped with PES (``evader_model``): the one calibrated to the
 paper's (PID(PF) captures it about as often as the paper's PID(PF) caught its evader, 27.3 %)
 and the fully trained one (docs/algorithms/evader_ddpg.md)."""
+
+MAX_ARENA = 1000.0
+"""Largest arena side (m) that ``validate`` accepts (the start regions are found on a grid of
+0.5 m cells)."""
 
 REWARD_KEYS = (
     "cooperation_weight",
@@ -42,6 +46,7 @@ REWARD_KEYS = (
 (:meth:`EnvConfig.for_evaluation`) resets them to the paper's values."""
 
 
+@strict_keywords
 @dataclass
 class EnvConfig:
     """The pursuit-evasion scenario. Build with ``EnvConfig(...)``, ``EnvConfig.from_dict`` or
@@ -216,6 +221,7 @@ class EnvConfig:
 
     def validate(self) -> EnvConfig:
         """Raise :class:`ConfigError` if any setting is impossible; return ``self``."""
+        check_types(self)  # the constructor accepts anything; a typed value is checked here
         positive = [
             "arena_width",
             "arena_height",
@@ -275,8 +281,20 @@ class EnvConfig:
         for name in positive_ints:
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.num_pursuers > 256:
-            raise ConfigError(f"num_pursuers must be at most 256, got {self.num_pursuers}")
+        # Bounds on what is allocated or looped over per environment: far beyond them a typo
+        # would exhaust memory or hang rather than fail.
+        limits = {
+            "num_pursuers": 256,
+            "arena_width": MAX_ARENA,  # the start regions are a grid of 0.5 m cells
+            "arena_height": MAX_ARENA,
+            "grid_rows": 100,
+            "grid_cols": 100,
+            "physics_substeps": 1000,
+            "history_length": 10_000,
+        }
+        for name, limit in limits.items():
+            if getattr(self, name) > limit:
+                raise ConfigError(f"{name} must be at most {limit:g}, got {getattr(self, name)}")
         if self.capture_count > self.num_pursuers:
             raise ConfigError(
                 f"capture_count ({self.capture_count}) is above num_pursuers "
@@ -302,7 +320,25 @@ class EnvConfig:
             raise ConfigError(f"building_height_range must be 0 < low <= high, got {[low, high]}")
         for pair in self.removed_blocks:
             if len(pair) != 2:
-                raise ConfigError(f"removed_blocks entries must be [row, col], got {pair!r}")
+                raise ConfigError(f"removed_blocks entries must be [row, col], got {list(pair)!r}")
+            row, col = pair
+            if self.layout == "grid" and not (
+                0 <= row < self.grid_rows and 0 <= col < self.grid_cols
+            ):
+                raise ConfigError(
+                    f"removed_blocks entry {list(pair)!r} lies outside the {self.grid_rows} x "
+                    f"{self.grid_cols} grid (rows 0..{self.grid_rows - 1}, cols "
+                    f"0..{self.grid_cols - 1})"
+                )
+        # Every other number must be finite too: NaN passes every comparison above it is not in.
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            values = value if isinstance(value, tuple) else (value,)
+            for item in values:
+                if isinstance(item, float) and not math.isfinite(item):
+                    many = isinstance(value, tuple)
+                    what = "hold finite numbers" if many else "be a finite number"
+                    raise ConfigError(f"{f.name} must {what}, got {value!r}")
         substep = self.dt / self.physics_substeps
         if substep * self.attitude_bandwidth > 0.5:
             raise ConfigError(

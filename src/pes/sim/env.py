@@ -14,6 +14,10 @@ from pes.sim import rng, scenario
 from pes.sim.config import EnvConfig, resolve_config
 from pes.sim.layout import Layout
 
+ACTION_LIMIT = 1e6
+"""Largest magnitude of an action component that ``step`` accepts. Actions are fractions of the
+maximum acceleration, clipped to norm 1; far beyond that the clipping overflows float32."""
+
 
 class PursuitEvasionEnv:
     """``num_envs`` pursuit-evasion games stepped together as tensors on one device.
@@ -230,9 +234,17 @@ class PursuitEvasionEnv:
             raise ActionError(f"{name} must have shape {list(shape)}, got {list(actions.shape)}")
         if not actions.is_floating_point():
             raise ActionError(f"{name} must be floating point, got {actions.dtype}")
+        # Checked in float32, as used (in float16 the limit itself would be infinite).
         actions = actions.to(device=self.device, dtype=torch.float32)
-        if self.check_actions and not bool(torch.isfinite(actions).all()):
-            raise ActionError(f"{name} hold NaN or infinite values")
+        # One reduction in the common case: NaN fails the comparison too.
+        if self.check_actions and not bool((actions.abs() <= ACTION_LIMIT).all()):
+            if not bool(torch.isfinite(actions).all()):
+                raise ActionError(f"{name} hold NaN or infinite values")
+            # Far beyond norm 1 the clipping itself overflows float32 (and turns to NaN).
+            raise ActionError(
+                f"{name} hold values beyond {ACTION_LIMIT:g}: actions are fractions of the "
+                "maximum acceleration, in [-1, 1] (clipped to norm 1)"
+            )
         return actions
 
     # --- state access, for recorders and tests -------------------------------------------------

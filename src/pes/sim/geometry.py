@@ -102,6 +102,23 @@ def obstacle_distances_xy(
     )
 
 
+def pick_nearest(
+    dist: Tensor, nx: Tensor, ny: Tensor, num_boxes: int
+) -> tuple[Tensor, Tensor, Tensor]:
+    """The nearest of the obstacles measured by :func:`obstacle_distances_xy` (..., B + 4):
+    its distance and normal (...), each, with :func:`nearest_obstacle_xy`'s choice on ties
+    (the first wall, else the first building; a wall over a building at equal distance)."""
+    wall_dist, side = dist[..., num_boxes:].min(dim=-1)
+    index = side + num_boxes
+    if num_boxes > 0:
+        box_dist, box = dist[..., :num_boxes].min(dim=-1)
+        closer = box_dist < wall_dist
+        index = torch.where(closer, box, index)
+        wall_dist = torch.where(closer, box_dist, wall_dist)
+    index = index.unsqueeze(-1)
+    return wall_dist, nx.gather(-1, index).squeeze(-1), ny.gather(-1, index).squeeze(-1)
+
+
 def nearest_obstacle(pos: Tensor, boxes: Tensor, arena: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     """:func:`nearest_obstacle_xy` for stacked positions (..., 2); returns the signed distance
     (...), the nearest surface point (..., 2) and the outward normal (..., 2)."""

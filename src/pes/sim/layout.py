@@ -13,6 +13,7 @@ A layout is a :class:`Layout`: the arena size and an array of boxes ``[xmin, ymi
 
 from __future__ import annotations
 
+import math
 import random
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from pes.config import read_text_file
 from pes.errors import ConfigError
 from pes.sim.config import EnvConfig
 
@@ -35,7 +37,15 @@ class Layout:
     heights: np.ndarray
 
     def __post_init__(self) -> None:
-        boxes = np.asarray(self.boxes, dtype=np.float64).reshape(-1, 4)
+        boxes = np.asarray(self.boxes, dtype=np.float64)
+        if boxes.size == 0:
+            boxes = boxes.reshape(0, 4)
+        if boxes.ndim != 2 or boxes.shape[1] != 4:
+            raise ConfigError(
+                f"buildings must be a list of [xmin, ymin, xmax, ymax], got shape {boxes.shape}"
+            )
+        if not np.all(np.isfinite(boxes)):
+            raise ConfigError("every building coordinate must be a finite number (no NaN or inf)")
         if np.any(boxes[:, 2] <= boxes[:, 0]) or np.any(boxes[:, 3] <= boxes[:, 1]):
             raise ConfigError("every building needs xmin < xmax and ymin < ymax")
         object.__setattr__(self, "boxes", boxes)
@@ -125,6 +135,18 @@ def _ascii_boxes(lines: list[str], width: float, height: float) -> list[list[flo
     ]
 
 
+def _numbers(value: object, field: str, meaning: str) -> list[float]:
+    """``value`` as a list of finite numbers, or a :class:`ConfigError` naming ``field``."""
+    if not isinstance(value, (list, tuple)):
+        raise ConfigError(f"{field} must be a list of numbers ({meaning}), got {value!r}")
+    for item in value:
+        if isinstance(item, bool) or not isinstance(item, (int, float)):
+            raise ConfigError(f"{field} must be a list of numbers ({meaning}), got {item!r}")
+        if not math.isfinite(item):
+            raise ConfigError(f"{field} must hold finite numbers ({meaning}), got {item!r}")
+    return [float(v) for v in value]
+
+
 def load_layout_file(path: str | Path, config: EnvConfig) -> Layout:
     """Read a layout file.
 
@@ -140,7 +162,7 @@ def load_layout_file(path: str | Path, config: EnvConfig) -> Layout:
     """
     path = Path(path)
     rng = random.Random(config.layout_seed)
-    text = path.read_text()
+    text = read_text_file(path, "layout file")
     width, height = config.arena_width, config.arena_height
     if path.suffix in (".yaml", ".yml"):
         try:
@@ -151,17 +173,40 @@ def load_layout_file(path: str | Path, config: EnvConfig) -> Layout:
             raise ConfigError(f"{path}: a layout file needs a 'buildings' list")
         unknown = set(data) - {"arena", "buildings", "heights"}
         if unknown:
-            raise ConfigError(f"{path}: unknown layout keys {sorted(unknown)}")
-        if "arena" in data and [float(v) for v in data["arena"]] != [width, height]:
+            raise ConfigError(f"{path}: unknown layout keys {sorted(map(str, unknown))}")
+        if "arena" in data:
+            arena = _numbers(data["arena"], f"{path}: arena", "[width, height] in metres")
+            if len(arena) != 2:
+                raise ConfigError(f"{path}: arena must be [width, height] in metres, got {arena}")
+            if arena != [width, height]:
+                raise ConfigError(
+                    f"{path}: arena {data['arena']} differs from the config's arena "
+                    f"[{width:g}, {height:g}]; set arena_width/arena_height to match"
+                )
+        buildings = data["buildings"]
+        if buildings is None:
+            buildings = []
+        if not isinstance(buildings, list):
             raise ConfigError(
-                f"{path}: arena {data['arena']} differs from the config's arena "
-                f"[{width:g}, {height:g}]; set arena_width/arena_height to match"
+                f"{path}: buildings must be a list of [xmin, ymin, xmax, ymax], got {buildings!r}"
             )
-        try:
-            boxes = np.array(data["buildings"], dtype=np.float64).reshape(-1, 4)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{path}: buildings must be [xmin, ymin, xmax, ymax] lists") from None
-        heights = data.get("heights") or _heights(len(boxes), config, rng)
+        rows = [
+            _numbers(row, f"{path}: buildings[{i}]", "[xmin, ymin, xmax, ymax] in metres")
+            for i, row in enumerate(buildings)
+        ]
+        for i, row in enumerate(rows):
+            if len(row) != 4:
+                raise ConfigError(
+                    f"{path}: buildings[{i}] must be [xmin, ymin, xmax, ymax] (4 numbers), "
+                    f"got {len(row)}"
+                )
+        boxes = np.array(rows, dtype=np.float64).reshape(-1, 4)
+        if "heights" in data and data["heights"] is not None:
+            heights = _numbers(data["heights"], f"{path}: heights", "building heights in metres")
+            if not all(h > 0 for h in heights):
+                raise ConfigError(f"{path}: heights must be positive numbers, got {heights}")
+        else:
+            heights = _heights(len(boxes), config, rng)
         if len(heights) != len(boxes):
             raise ConfigError(f"{path}: {len(heights)} heights for {len(boxes)} buildings")
     else:

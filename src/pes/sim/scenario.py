@@ -52,6 +52,8 @@ from pes.sim.geometry import (
     geodesic_distance,
     nearest_obstacle,
     nearest_obstacle_xy,
+    obstacle_distances_xy,
+    pick_nearest,
 )
 from pes.sim.layout import Layout, make_layout
 
@@ -67,6 +69,9 @@ STREAM_DISTURBANCE = 4
 
 SPAWN_CELL = 0.5  # m, resolution of the grid of free start cells
 CONTACT_GAP = 1e-3  # m, how far outside the body radius a pushed-out vehicle is put
+CONTACT_PASSES = 1  # passes of resolve_contacts after the push out of the nearest obstacle (one
+# leaves orthogonal pairs -- the corners of walls and blocks -- together; more only matter where
+# obstacles stand closer than a body diameter, where no free spot need exist)
 ROADMAP_CLEARANCE = 0.7  # m beyond the body radius: the waypoints round building corners
 
 
@@ -409,6 +414,57 @@ def softplus_obstacle_term(obstacle_dist: Tensor, safe_distance: float, k: float
     return softplus((safe_distance - obstacle_dist) / k) * k
 
 
+def resolve_contacts(
+    x: Tensor,
+    y: Tensor,
+    vx: Tensor,
+    vy: Tensor,
+    dists: Tensor,
+    nxs: Tensor,
+    nys: Tensor,
+    radius: float,
+) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """Push vehicles (E, A) -- pursuers, then the evader last -- out of every wall and
+    building still within ``radius`` of their centre, all obstacles at once, in
+    :data:`CONTACT_PASSES` passes.
+
+    ``dists`` (E, A, K) are the signed distances of the K obstacles from (x, y) and ``nxs``,
+    ``nys`` their outward normals (:func:`obstacle_distances_xy`, possibly measured before a
+    move and carried along it to first order). Each obstacle closer than ``radius`` pushes the
+    centre along its normal to ``radius + CONTACT_GAP``; the pushes are combined per axis (the
+    largest each way), so that the two walls of a corner are left together and two touching
+    buildings do not push twice. Distances are carried along each push to first order: exact
+    for walls and building faces and, the distance to a convex box being convex, never more
+    than the true distance near a building's corner, so a push is never too short. A pursuer so
+    pushed stops; the evader loses its velocity into each obstacle. Vehicles clear of every
+    obstacle are not changed at all. Returns x, y, vx, vy, the distances (E, A, K) and
+    ``touched`` (E, A) bool: pushed in some pass."""
+    touched = torch.zeros_like(x, dtype=torch.bool)
+    for _ in range(CONTACT_PASSES):  # a fixed count: no loop over vehicles or obstacles
+        over = dists < radius
+        hit = over.any(-1)
+        push = torch.where(over, radius + CONTACT_GAP - dists, 0.0)
+        dx, dy = _per_axis(nxs * push), _per_axis(nys * push)
+        x, y = x + dx, y + dy
+        dists = dists + nxs * dx.unsqueeze(-1) + nys * dy.unsqueeze(-1)
+        # The evader (last) slides: it loses its velocity into each obstacle it touches.
+        enx, eny = nxs[:, -1], nys[:, -1]  # (E, K)
+        inward = (vx[:, -1:] * enx + vy[:, -1:] * eny).clamp(max=0.0)
+        inward = torch.where(over[:, -1], inward, 0.0)
+        slide_x = vx[:, -1] - _per_axis(inward * enx)
+        slide_y = vy[:, -1] - _per_axis(inward * eny)
+        # Pursuers stop.
+        vx = torch.where(hit, torch.cat([torch.zeros_like(vx[:, :-1]), slide_x[:, None]], 1), vx)
+        vy = torch.where(hit, torch.cat([torch.zeros_like(vy[:, :-1]), slide_y[:, None]], 1), vy)
+        touched = touched | hit
+    return x, y, vx, vy, dists, touched
+
+
+def _per_axis(moves: Tensor) -> Tensor:
+    """Combine (..., K) moves along one axis: the largest one each way, (...)."""
+    return moves.amax(-1).clamp(min=0.0) + moves.amin(-1).clamp(max=0.0)
+
+
 def advance(
     sc: Scenario, state: dict[str, Tensor], actions: Tensor, evader_action: Tensor | None
 ) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
@@ -453,8 +509,9 @@ def advance(
         )
     )
 
-    # Collisions with buildings and walls: push out of the obstacle along its normal.
-    dist, nx, ny = nearest_obstacle_xy(moved.x, moved.y, sc.boxes, sc.arena)
+    # Collisions with buildings and walls: push out of the nearest obstacle along its normal.
+    dists, nxs, nys = obstacle_distances_xy(moved.x, moved.y, sc.boxes, sc.arena)  # (E, A, K)
+    dist, nx, ny = pick_nearest(dists, nxs, nys, sc.boxes.shape[0])
     contact = dist < cfg.body_radius
     push = torch.where(contact, cfg.body_radius + CONTACT_GAP - dist, 0.0)
     x, y = moved.x + nx * push, moved.y + ny * push
@@ -467,6 +524,15 @@ def advance(
     slide = contact & ~is_pursuer
     vx = torch.where(stop, 0.0, torch.where(slide, moved.vx - inward * nx, moved.vx))
     vy = torch.where(stop, 0.0, torch.where(slide, moved.vy - inward * ny, moved.vy))
+    # That push leaves the nearest obstacle only: in a corner (two walls, a wall and a building,
+    # two buildings) the others may still hold the body. Leave them all.
+    dists = dists + nxs * (nx * push).unsqueeze(-1) + nys * (ny * push).unsqueeze(-1)
+    x, y, vx, vy, dists, touched = resolve_contacts(x, y, vx, vy, dists, nxs, nys, cfg.body_radius)
+    contact = contact | touched
+    crashed = contact[:, :n] & alive0
+    again, anx, any_ = pick_nearest(dists, nxs, nys, sc.boxes.shape[0])
+    dist = torch.where(touched, again, dist)
+    nx, ny = torch.where(touched, anx, nx), torch.where(touched, any_, ny)
     moved = moved._replace(
         x=x, y=y, vx=vx, vy=vy, obstacle_dist=dist, obstacle_dx=-nx * dist, obstacle_dy=-ny * dist
     )
