@@ -66,9 +66,9 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
         learner.update(gen)
     updates, tp_time, start = 0, 0.0, time.perf_counter()
     while time.perf_counter() - start < seconds:
-        if hasattr(learner, "update_tp") and learner.tp is not None:
+        if hasattr(learner, "tp"):
             t0 = time.perf_counter()
-            learner.update_tp(gen)
+            learner.auxiliary_update(gen)
             sync()
             tp_time += time.perf_counter() - t0
         learner.update(gen)
@@ -79,7 +79,7 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
     # update() includes one TP step: subtract the extra one timed separately
     update_s = (total - tp_time) / updates
     tp_s = tp_time / updates
-    train_rate = 1.0 / (1.0 / collect_rate + update_s / cfg.update_every)
+    train_rate = 1.0 / (1.0 / collect_rate + update_s / lc.update_every)
     per = learner.buffer.bytes_per_transition
     return {
         "algo": algo,
@@ -87,9 +87,9 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
         "device": device,
         "num_envs": cfg.num_envs,
         "num_pursuers": env_cfg.num_pursuers,
-        "hidden": cfg.hidden,
-        "batch_size": cfg.batch_size,
-        "update_every": cfg.update_every,
+        "hidden": lc.hidden,
+        "batch_size": lc.batch_size,
+        "update_every": lc.update_every,
         "env_compiled": env.compiled,
         "collect_env_steps_per_s": round(collect_rate, 1),
         "update_ms": round(update_s * 1000, 2),

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -173,3 +175,11 @@ def test_a_key_the_method_does_not_read_is_an_error_naming_the_method():
             build_train_config("cbc-tp", "tiny", bad)
     with pytest.raises(ConfigError, match="batch_size"):
         build_train_config("cbc-tp", "tiny", {"batch_size": 10**6})
+
+
+def test_the_write_your_own_learner_example_trains():
+    """docs/algorithms/write_your_own.md's example: one file, registered, trains and evaluates."""
+    example = SRC.parents[1] / "examples" / "self_row_ddpg.py"
+    proc = subprocess.run([sys.executable, str(example)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "'n_step': 'applied'" in proc.stdout and "evaluation:" in proc.stdout

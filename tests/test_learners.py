@@ -213,7 +213,7 @@ def test_exits_are_charged_their_last_reward_for_the_steps_to_come(tmp_path):
         episodes=8,
         eval_episodes=0,
         # exits end the n-step windows, and are charged at their last transition
-        protocol={"n_step": 3, "crash_curriculum": {"disable_at": 0.01, "charge_exits": True}},
+        protocol={"n_step": 3, "crash_curriculum": {"disable_at": 0.0, "charge_exits": True}},
     )
     assert summary["updates"] > 0
 

@@ -26,7 +26,7 @@ def mlp(sizes: list[int], out_act: nn.Module | None = None) -> nn.Sequential:
 
 
 class RowScaled(nn.Module):
-    """Base of the CBC actor and critic: the factors applied to the columns of a Table I row
+    """Base of the networks that read Table I rows: the factors applied to a row's columns
     before a network sees it (a buffer, so that they travel with the weights).
 
     The rows are in arena units (metres / arena size), where the 2 m safety margin of eq. (9) is

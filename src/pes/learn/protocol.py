@@ -111,7 +111,8 @@ class CrashCurriculum:
     for the rest of the run, as in every evaluation."""
 
     disable_at: float = 0.3
-    """Training success rate (0-1) of a log row from which crashes disable."""
+    """Training success rate (0-1) of a log row from which crashes disable (0: from the first
+    episode, the charge on exits kept)."""
     charge_exits: bool = True
     """A pursuer that leaves the game (disabled by a crash, or its episode failed with too few
     pursuers left) is charged its last step's reward, crash term aside, for every step to come
@@ -119,9 +120,9 @@ class CrashCurriculum:
 
     def validate(self) -> None:
         check_finite(self, "crash_curriculum")
-        if not 0.0 < self.disable_at <= 1.0:
+        if not 0.0 <= self.disable_at <= 1.0:
             raise ConfigError(
-                f"crash_curriculum.disable_at must be in (0, 1], got {self.disable_at}"
+                f"crash_curriculum.disable_at must be in [0, 1], got {self.disable_at}"
             )
 
 

@@ -258,6 +258,8 @@ def train(
             write_text_atomic(out / "init_from.json", json.dumps(source, indent=2) + "\n")
         if protocol.speed_curriculum is not None:
             prog.evader_speed = protocol.speed_curriculum.start
+        if protocol.crash_curriculum is not None and protocol.crash_curriculum.disable_at == 0:
+            prog.crashes_disable = True
     aids = learner_cls.aids(protocol)
     write_text_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
 
