@@ -156,3 +156,121 @@ def test_reset_without_td_keys():
     env.reset()
     out = env.reset(TensorDict({"_reset": torch.tensor([[True], [False], [False]])}, [3]))
     assert out[GROUP, "observation"].shape == (3, 5, 45)
+
+
+# --- BenchMARL ----------------------------------------------------------------------------------
+
+BENCHMARL_TASK = {"max_steps": 20, "num_pursuers": 3, "capture_count": 2}
+
+
+def tiny_experiment(tmp_path, task_name: str, algorithm: str, task_config=None):
+    """A BenchMARL experiment shrunk to seconds: two iterations of 60 frames, 2 envs."""
+    pytest.importorskip("benchmarl")
+    from benchmarl import algorithms
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models import MlpConfig
+
+    from pes.benchmarl import PESTask
+
+    config = ExperimentConfig.get_from_yaml()
+    config.save_folder = str(tmp_path)
+    config.loggers = []
+    config.create_json = False
+    config.checkpoint_at_end = False
+    config.max_n_iters = 2
+    config.max_n_frames = None
+    config.on_policy_collected_frames_per_batch = 60
+    config.on_policy_n_envs_per_worker = 2
+    config.on_policy_n_minibatch_iters = 1
+    config.on_policy_minibatch_size = 20
+    config.off_policy_collected_frames_per_batch = 60
+    config.off_policy_n_envs_per_worker = 2
+    config.off_policy_n_optimizer_steps = 2
+    config.off_policy_train_batch_size = 16
+    config.off_policy_memory_size = 200
+    config.off_policy_init_random_frames = 0
+    config.evaluation = True
+    config.evaluation_interval = 60
+    config.evaluation_episodes = 2
+    config.render = False
+    algo_config = getattr(algorithms, f"{algorithm}Config").get_from_yaml()
+    task = getattr(PESTask, task_name.upper()).get_task()
+    task.config.update(task_config or BENCHMARL_TASK)
+    model = MlpConfig.get_from_yaml()
+    model.num_cells = [16]
+    return Experiment(
+        task=task,
+        algorithm_config=algo_config,
+        model_config=model,
+        critic_model_config=model,
+        seed=0,
+        config=config,
+    )
+
+
+@pytest.mark.parametrize("algorithm", ["Mappo", "Ippo", "Maddpg", "Masac"])
+def test_benchmarl_algorithms_run(tmp_path, algorithm):
+    experiment = tiny_experiment(tmp_path, "default", algorithm)
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+    assert experiment.total_frames == 120
+
+
+@pytest.mark.parametrize("task_name", ["damaged", "point_mass", "easy"])
+def test_benchmarl_tasks_run(tmp_path, task_name):
+    experiment = tiny_experiment(tmp_path, task_name, "Mappo")
+    config = experiment.task.config
+    if task_name == "damaged":
+        assert config["damaged"] == 1
+    if task_name == "point_mass":
+        assert config["dynamics"] == "point_mass"
+    if task_name == "easy":
+        assert config["evader_max_speed"] < config["pursuer_max_speed"]
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+
+
+def test_benchmarl_task_specs_and_errors():
+    pytest.importorskip("benchmarl")
+    from benchmarl.environments import task_config_registry
+
+    from pes.benchmarl import PESTask
+
+    assert task_config_registry["pes/point_mass"] is PESTask.POINT_MASS
+    task = PESTask.DEFAULT.get_task({"num_pursuers": 3})
+    env = task.get_env_fun(4, True, 0, "cpu")()
+    assert task.group_map(env) == {GROUP: ["pursuer_0", "pursuer_1", "pursuer_2"]}
+    assert task.observation_spec(env)[GROUP, "observation"].shape == (3, 27)
+    assert task.state_spec(env)["state"].shape == (32,)
+    assert set(task.info_spec(env)[GROUP, "info"].keys()) == {"crashed", "distance"}
+    assert task.action_spec(env)[GROUP, "action"].shape == (3, 2)
+    assert task.max_steps(env) == 500
+    with pytest.raises(pes.errors.ConfigError):
+        PESTask.DEFAULT.get_task({"num_pursuer": 3}).get_env_fun(4, True, 0, "cpu")
+    with pytest.raises(ValueError):
+        task.get_env_fun(4, False, 0, "cpu")
+
+
+def test_benchmarl_hydra_config_and_log_info():
+    """``task=pes/<task>`` resolves in BenchMARL's own config tree (what ``python -m
+    pes.benchmarl`` runs), EnvConfig keys are task overrides, and the success rate is logged."""
+    pytest.importorskip("benchmarl")
+    from benchmarl.hydra_config import load_task_config_from_hydra
+    from hydra import compose, initialize_config_module
+
+    from pes.benchmarl import PESClass, register
+
+    register()
+    with initialize_config_module(config_module="benchmarl.conf", version_base=None):
+        cfg = compose(
+            config_name="config",
+            overrides=["algorithm=mappo", "task=pes/easy", "task.num_pursuers=3"],
+        )
+    task = load_task_config_from_hydra(cfg.task, "pes/easy")
+    assert task.config["num_pursuers"] == 3 and task.config["evader_max_speed"] == 8.0
+    env = task.get_env_fun(2, True, 0, "cpu")()
+    td = env.rollout(30, break_when_any_done=False)  # 500-step episodes: none ends
+    assert PESClass.log_info(td) == {}
+    td["next", "done"][:, -1] = True
+    td["next", "success"][0, -1] = True
+    assert PESClass.log_info(td) == {"collection/success_rate": 0.5}

@@ -78,7 +78,7 @@ except ImportError as exc:  # pragma: no cover - depends on the optional extra
 
 from pes.sim import scenario
 from pes.sim.config import EnvConfig
-from pes.sim.env import PursuitEvasionEnv, make_env
+from pes.sim.env import PursuitEvasionEnv, make_env, resolve_device
 from pes.sim.scenario import OBS_FEATURES
 
 GROUP = "pursuers"
@@ -117,6 +117,7 @@ class PESTorchRLEnv(EnvBase):
             config, num_envs, device, seed, compile=sim_compile, check_actions=check_actions
         )
         super().__init__(device=sim.device, batch_size=torch.Size([num_envs]))
+        self._sim_seed, self._sim_compile = seed, sim_compile
         self.sim: PursuitEvasionEnv = sim
         """The batched simulator underneath (its ``state``, ``positions``, ``layout``...)."""
         self.config = sim.config
@@ -192,6 +193,7 @@ class PESTorchRLEnv(EnvBase):
 
     # --- EnvBase ------------------------------------------------------------------------------
     def _set_seed(self, seed: int | None) -> None:
+        self._sim_seed = seed
         obs, info = self.sim.reset(seed=seed)
         self._remember(obs, info)
         # The seeded first episodes are handed out by the next reset().
@@ -312,6 +314,26 @@ class PESTorchRLEnv(EnvBase):
                 self.sim.scenario, state, views, pending, self.sim.reset_capacity
             )
         self._views = views
+
+    def to(self, device: str | torch.device) -> PESTorchRLEnv:
+        """Move the environment, the simulator's state included, to ``device``."""
+        device = resolve_device(device)
+        if device != self.sim.device:
+            old = self.sim
+            self.sim = make_env(
+                self.config,
+                self.num_envs,
+                device,
+                self._sim_seed,
+                compile=self._sim_compile,
+                check_actions=old.check_actions,
+            )
+            if old.state is not None:
+                self.sim.set_state(old.state)
+            if self._views is not None:
+                self._views = {k: v.to(device) for k, v in self._views.items()}
+            self._auto_reset = self._auto_reset.to(device)
+        return super().to(device)
 
     def __repr__(self) -> str:
         return (
