@@ -140,6 +140,8 @@ def test_options_pass_through():
     assert env.sim.compiled and not env.sim.check_actions
     with pytest.raises(pes.errors.ConfigError):
         PESTorchRLEnv({"num_pursuer": 3})
+    with pytest.raises(pes.errors.ConfigError, match="external"):
+        PESTorchRLEnv({"evader_policy": "external"})
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA GPU")

@@ -55,7 +55,8 @@ and the next ``reset()`` returns those first observations.
 Arguments: ``config`` (an :class:`pes.EnvConfig`, a dict of its keys, or None), ``num_envs``,
 ``device`` (``"cpu"`` or ``"cuda"``), ``seed``, ``sim_compile`` (:func:`pes.make_env`'s
 ``compile``: the simulator's step and auto-reset fused by ``torch.compile``) and
-``check_actions`` (:func:`pes.make_env`'s, as it is). The simulator's option is not called
+``check_actions`` (:func:`pes.make_env`'s, as it is). The evader runs its configured policy
+inside the simulator (``evader_policy="external"`` is refused). The simulator's option is not called
 ``compile`` here because TorchRL's ``EnvBase`` takes that keyword itself (torchrl >= 0.12:
 ``compile=True`` compiles TorchRL's own ``step_and_maybe_reset`` around this environment).
 """
@@ -76,6 +77,7 @@ except ImportError as exc:  # pragma: no cover - depends on the optional extra
         "pes.torchrl needs TorchRL: pip install 'pes[torchrl]' (torchrl>=0.11)"
     ) from exc
 
+from pes.errors import ConfigError
 from pes.sim import scenario
 from pes.sim.config import EnvConfig
 from pes.sim.env import PursuitEvasionEnv, make_env, resolve_device
@@ -116,6 +118,11 @@ class PESTorchRLEnv(EnvBase):
         sim = make_env(
             config, num_envs, device, seed, compile=sim_compile, check_actions=check_actions
         )
+        if sim.config.evader_policy == "external":
+            raise ConfigError(
+                "PESTorchRLEnv has one agent group, the pursuers: evader_policy='external' is "
+                "not supported here (choose flee, random or ddpg)"
+            )
         super().__init__(device=sim.device, batch_size=torch.Size([num_envs]))
         self._sim_seed, self._sim_compile = seed, sim_compile
         self.sim: PursuitEvasionEnv = sim

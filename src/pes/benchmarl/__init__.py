@@ -24,7 +24,7 @@ sees:
 * observation spec: ``("pursuers", "observation")`` (N, 9N) only; the env also carries the row
   and alive masks, which BenchMARL's models do not take;
 * state spec: ``"state"`` (8(N+1),), the global state, used by centralised critics (MAPPO,
-  MADDPG, MASAC, QMIX...);
+  MADDPG, MASAC...);
 * info spec: ``("pursuers", "info")`` with ``crashed`` and ``distance``, logged per iteration as
   ``collection/pursuers/info/...``; :meth:`PESClass.log_info` adds ``collection/success_rate``
   (captures among the episodes that ended in the batch);
