@@ -131,8 +131,11 @@ def test_seed_and_reset():
     first = env.reset()
     again = PESTorchRLEnv(num_envs=2, seed=7).reset()
     assert torch.equal(first[GROUP, "observation"], again[GROUP, "observation"])
-    # A second reset starts new episodes.
+    # A second reset starts new episodes, and what was handed out before stays as it was.
+    snapshot = first.clone()
     assert not torch.equal(env.reset()[GROUP, "observation"], first[GROUP, "observation"])
+    env.reset(first.clone().set("_reset", torch.tensor([[True], [False]])))
+    assert (first == snapshot).all()
 
 
 def test_options_pass_through():

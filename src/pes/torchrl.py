@@ -230,7 +230,7 @@ class PESTorchRLEnv(EnvBase):
         group = self._group(
             views["obs"],
             views["obs_mask"],
-            self.sim.alive,
+            self.sim.alive.clone(),  # a view of the state, which resets rewrite in place
             crashed=torch.zeros_like(distance),
             distance=distance,
         )
@@ -239,7 +239,7 @@ class PESTorchRLEnv(EnvBase):
                 GROUP: group,
                 "state": views["state"].flatten(1),
                 "success": zeros,
-                "done": zeros,
+                "done": zeros.clone(),
                 "terminated": zeros.clone(),
                 "truncated": zeros.clone(),
             },
