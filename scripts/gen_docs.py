@@ -6,7 +6,9 @@
 Generated parts sit between ``<!-- name -->`` and ``<!-- /name -->`` markers:
 
 * ``docs/scenario.md`` ``config-table``: every EnvConfig key, type, default and meaning;
-* ``docs/scenario.md`` ``calibration``: results/calibration.json as a table.
+* ``docs/scenario.md`` ``calibration``: results/calibration.json as a table;
+* ``docs/training.md`` ``train-config``: every key of a run (``TrainConfig``);
+* ``docs/algorithms/*.md`` ``settings-ALGO``: each method's settings, presets and aids.
 """
 
 from __future__ import annotations
@@ -19,7 +21,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from pes.algos import ALGOS  # noqa: E402
 from pes.config import field_table  # noqa: E402
+from pes.learn.config import TrainConfig  # noqa: E402
+from pes.learn.protocol import PROTOCOLS  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
 
 
@@ -46,9 +51,41 @@ def _calibration_table() -> str:
     return "\n".join(rows)
 
 
+def _learner_table(algo: str) -> str:
+    """The method's settings (its config dataclass) and its presets' values of them."""
+    cls = ALGOS[algo]
+    lines = [field_table(cls.Config), ""]
+    for name, preset in cls.PRESETS.items():
+        keys = {k: v for k, v in preset.items() if k not in ("env", "protocol")}
+        shown = ", ".join(f"`{k}={v}`" for k, v in keys.items())
+        lines.append(f"* preset `{name}`: {shown or 'the defaults'}")
+    lines.append(
+        f"* default protocol: `{cls.default_protocol}` (the `paper` preset: `paper`); "
+        "aids applied: " + ", ".join(f"`{k}` {v}" for k, v in cls.aids(PROTOCOLS["pes"]).items())
+    )
+    return "\n".join(lines)
+
+
+ALGO_PAGES = {
+    "cbc-tp": "cbc_tp",
+    "cbc": "cbc_tp",
+    "maddpg": "maddpg",
+    "ddpg": "ddpg",
+    "bicnet": "bicnet",
+    "ppo": "ppo",
+    "maac": "maac",
+    "evader-ddpg": "evader_ddpg",
+}
+"""Method -> its page under docs/algorithms/ (CBC Net's settings are on CBC-TP Net's)."""
+
 GENERATED = {
     ("docs/scenario.md", "config-table"): lambda: field_table(EnvConfig),
     ("docs/scenario.md", "calibration"): _calibration_table,
+    ("docs/training.md", "train-config"): lambda: field_table(TrainConfig),
+    **{
+        (f"docs/algorithms/{page}.md", f"settings-{algo}"): (lambda a=algo: _learner_table(a))
+        for algo, page in ALGO_PAGES.items()
+    },
 }
 
 

@@ -32,11 +32,13 @@ CAPTURE_TASK = dict(
 captures it, 100-step episodes, no buildings. An untrained swarm hovers and never captures."""
 
 
-def assert_learns(algo: str, run: Path, **values) -> None:
-    """Train ``algo``'s tiny preset on :data:`CAPTURE_TASK` with ``values`` on top into ``run``;
-    evaluated with the paper's reward over 40 episodes, the trained policy must capture at least
-    20 points more often and earn clearly more reward than an untrained one."""
-    cfg = build_train_config(algo, "tiny", dict(FAST, env=CAPTURE_TASK, eval_episodes=0, **values))
+def assert_learns(algo: str, run: Path, protocol: str = "pes", **values) -> None:
+    """Train ``algo``'s tiny preset under ``protocol`` on :data:`CAPTURE_TASK` with ``values``
+    on top into ``run``; evaluated with the paper's reward over 40 episodes, the trained policy
+    must capture at least 20 points more often and earn clearly more reward than an untrained
+    one."""
+    values = dict(FAST, env=CAPTURE_TASK, eval_episodes=0, **values)
+    cfg = build_train_config(algo, "tiny", values, protocol=protocol)
     train(cfg, run, progress=False)
     eval_cfg = cfg.env_config().for_evaluation(disturbance=False)  # the paper's reward
     trained, _ = load_pursuer_policy(run, eval_cfg)

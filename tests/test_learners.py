@@ -521,6 +521,7 @@ def test_resume_after_sigkill(tmp_path):
     assert [untimed(r) for r in resumed[:kept]] == [untimed(r) for r in reference[:kept]]
 
 
+@pytest.mark.slow
 def test_cbc_tp_learns_on_a_tiny_budget(tmp_path):
     """Fixed seed, ~80 s: the identity-style capture task of tests/learning.py."""
     assert_learns("cbc-tp", tmp_path / "run", episodes=200)

@@ -83,6 +83,16 @@ def _positive(text: str) -> int:
     return value
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {value}")
+    return value
+
+
 def _non_negative(text: str) -> int:
     try:
         value = int(text)
@@ -423,6 +433,48 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_tune(args: argparse.Namespace) -> int:
+    import shlex
+
+    from pes.experiments.tune import tune
+
+    out = args.out or f"results/tuning/{args.algo}"
+    _say(
+        args,
+        f"tuning {args.algo} ({args.protocol} protocol): {args.trials} trials of "
+        f"{args.minutes:g} minutes into {out}",
+    )
+    summary = tune(
+        args.algo,
+        trials=args.trials,
+        minutes=args.minutes,
+        eval_episodes=args.eval_episodes,
+        protocol=args.protocol,
+        seed=args.seed,
+        out=out,
+        use_ray=False if args.no_ray else None,
+        ray_address=args.ray_address,
+        parallel=args.parallel,
+        progress=not args.json,
+        command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["tune"] else "",
+    )
+    if args.json:
+        _print_json(summary)
+    else:
+        best = summary["results"][0] if summary["results"] else None
+        print(
+            f"{summary['finished']} of {summary['trials']} trials finished; best: "
+            + (
+                f"{best['id']} {best['values'] or '(quick preset)'}: "
+                f"{100 * best['success_rate']:.1f} % in {best['mean_steps']:.0f} steps"
+                if best
+                else "none yet"
+            )
+            + f"; report: {out}/README.md"
+        )
+    return 0
+
+
 # --- the parser ------------------------------------------------------------------------------
 
 
@@ -676,6 +728,45 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reproduce)
+
+    p = sub.add_parser(
+        "tune",
+        help="the same hyper-parameter search for any learner",
+        description="Random search over the learner's key settings (its TUNE_SPACE: learning "
+        "rates, exploration or entropy, batch size, network width): each trial trains the "
+        "quick preset with its settings for --minutes minutes on one thread under --protocol "
+        "and is scored on --eval-episodes held-out episodes; trial t00 is the preset itself. "
+        "Trials run under Ray when it is installed, else one after the other; re-running "
+        "resumes. Writes OUT/tuning.json and OUT/README.md (see docs/reproduce.md).",
+    )
+    p.add_argument("--algo", required=True, choices=[a for a in ALGOS if a != "evader-ddpg"])
+    p.add_argument("--protocol", choices=["pes", "paper"], default="pes", help="training protocol")
+    p.add_argument("--trials", type=_positive, default=8, help="trials (default: 8)")
+    p.add_argument(
+        "--minutes",
+        type=_positive_float,
+        default=10.0,
+        help="training minutes per trial (default: 10)",
+    )
+    p.add_argument(
+        "--eval-episodes",
+        type=_positive,
+        default=200,
+        help="held-out evaluation episodes per trial (default: 200)",
+    )
+    p.add_argument("--seed", type=_non_negative, default=0, help="training and search seed")
+    p.add_argument("--ray-address", default=None, metavar="A", help="a Ray cluster to use")
+    p.add_argument("--no-ray", action="store_true", help="run the trials here, one at a time")
+    p.add_argument(
+        "--parallel",
+        type=_non_negative,
+        default=0,
+        metavar="N",
+        help="with Ray, at most N trials at once (default 0: one per CPU)",
+    )
+    p.add_argument("--out", default=None, help="output folder (default: results/tuning/ALGO)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_tune)
     return parser
 
 

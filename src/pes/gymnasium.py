@@ -27,6 +27,7 @@ import torch
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 
+from pes.pettingzoo import PESParallelEnv
 from pes.sim.config import EnvConfig
 from pes.sim.env import make_env
 from pes.sim.scenario import OBS_FEATURES
@@ -53,8 +54,6 @@ class PursuitEvasionGym(gym.Env):
     def __init__(
         self, render_mode: str | None = None, compile: bool = False, **config: Any
     ) -> None:
-        from pes.pettingzoo import PESParallelEnv
-
         # The PettingZoo env already knows how to draw; the game itself is the batched env.
         self._view = PESParallelEnv(render_mode=render_mode, **config) if render_mode else None
         self.config = EnvConfig.from_dict(config)

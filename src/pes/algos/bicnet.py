@@ -117,6 +117,10 @@ class BiCNet(ActorCritic):
     name = "bicnet"
     Config = BiCNetConfig
     PRESETS = BICNET_PRESETS
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        **ActorCritic.TUNE_SPACE,
+        "hidden": ("choice", [32, 64, 128]),
+    }
 
     @staticmethod
     def make_actor(lc: BiCNetConfig, num_pursuers: int) -> nn.Module:

@@ -352,6 +352,10 @@ class CBCNet(ActorCritic):
     name = "cbc"
     Config = CBCNetConfig
     PRESETS = CBC_PRESETS
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        **ActorCritic.TUNE_SPACE,
+        "hidden": ("choice", [32, 64, 128]),
+    }
 
     @staticmethod
     def make_actor(lc: CBCNetConfig, num_pursuers: int) -> nn.Module:

@@ -269,6 +269,12 @@ class MAAC(Learner):
     name = "maac"
     Config = MAACConfig
     PRESETS = MAAC_PRESETS
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        "lr_actor": ("log", 1e-4, 2e-3),
+        "lr_critic": ("log", 3e-4, 3e-3),
+        "target_entropy": ("choice", [-4.0, -2.0, -1.0]),
+        "hidden": ("choice", [32, 64, 128]),
+    }
     AIDS: ClassVar[dict[str, str]] = {
         "noise": "not applied: MAAC explores by sampling its stochastic policy, at the entropy "
         "its temperature keeps (alpha, target_entropy)",

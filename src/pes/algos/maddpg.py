@@ -147,6 +147,10 @@ class MADDPG(ActorCritic):
     name = "maddpg"
     Config = MADDPGConfig
     PRESETS = MADDPG_PRESETS
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        **ActorCritic.TUNE_SPACE,
+        "mlp_hidden": ("choice", [64, 128, 256]),
+    }
 
     @staticmethod
     def make_actor(lc: MADDPGConfig, num_pursuers: int) -> nn.Module:

@@ -167,6 +167,12 @@ class PPO(Learner):
     name = "ppo"
     Config = PPOConfig
     PRESETS = PPO_PRESETS
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        "lr_actor": ("log", 1e-4, 1e-3),
+        "lr_critic": ("log", 3e-4, 3e-3),
+        "ent_coef": ("choice", [0.0, 1e-3, 1e-2]),
+        "hidden": ("choice", [64, 128, 256]),
+    }
     on_policy = True
     AIDS: ClassVar[dict[str, str]] = {
         "noise": "not applied: PPO explores by its Gaussian policy's own spread (log_std_init, "

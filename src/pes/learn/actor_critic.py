@@ -117,6 +117,11 @@ class ActorCritic(Learner):
         "demonstrations": "",
         "charge_exits": "",
     }
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        "lr_actor": ("log", 1e-4, 2e-3),
+        "lr_critic": ("log", 3e-4, 3e-3),
+        "batch_size": ("choice", [128, 256, 512]),
+    }
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
         super().__init__(cfg, env_cfg, device)

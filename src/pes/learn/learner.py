@@ -49,6 +49,10 @@ class Learner:
     when applied as the protocol describes it, or the reason it is not (or how it is adapted).
     An aid missing here is not applied."""
 
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {}
+    """The keys ``pes tune`` searches (two to four): key -> ``("log", low, high)`` or
+    ``("choice", [values])`` (:mod:`pes.experiments.tune`)."""
+
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
         self.cfg = cfg
         self.env_cfg = env_cfg
