@@ -20,7 +20,7 @@ from torch import Tensor, nn
 from pes.errors import ConfigError
 from pes.learn.buffer import ReplayBuffer
 from pes.learn.common import optimise, soft_update, target_copy
-from pes.learn.config import LearnerConfig, TrainConfig
+from pes.learn.config import OffPolicyConfig, TrainConfig
 from pes.learn.learner import Learner
 from pes.learn.nets import mlp
 from pes.learn.noise import OUNoise
@@ -30,27 +30,9 @@ from pes.sim.config import EnvConfig
 
 
 @dataclass
-class EvaderDDPGConfig(LearnerConfig):
+class EvaderDDPGConfig(OffPolicyConfig):
     """The DDPG evader's settings (the paper's, §V-A, with 128 units)."""
 
-    gamma: float = 0.95
-    """Discount factor."""
-    lr_actor: float = 1e-3
-    """Adam learning rate of the actor."""
-    lr_critic: float = 1e-3
-    """Adam learning rate of the critic."""
-    tau: float = 1e-2
-    """Soft target update rate."""
-    buffer_size: int = 1_000_000
-    """Transitions kept in the replay buffer."""
-    batch_size: int = 512
-    """Minibatch of the updates."""
-    update_every: int = 50
-    """Collected transitions per update."""
-    warmup: int = 5000
-    """Transitions collected before the first update."""
-    grad_clip: float = 1.0
-    """Gradient norm clip (0 = none)."""
     action_reg: float = 1e-3
     """Weight of the squared action in the actor loss."""
     hidden: int = 128
@@ -58,15 +40,8 @@ class EvaderDDPGConfig(LearnerConfig):
     opponent: str = "pid-pf"
     """Pursuers the evader trains against (``pid-pf`` or ``random``)."""
 
-    POSITIVE: ClassVar[tuple[str, ...]] = (
-        "lr_actor",
-        "lr_critic",
-        "buffer_size",
-        "batch_size",
-        "update_every",
-        "hidden",
-    )
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("warmup", "grad_clip", "action_reg")
+    POSITIVE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.POSITIVE, "hidden")
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.NON_NEGATIVE, "action_reg")
 
     def check(self) -> None:
         if self.opponent not in ("pid-pf", "random"):

@@ -47,7 +47,7 @@ from pes.learn.common import (
     soft_update,
     target_copy,
 )
-from pes.learn.config import LearnerConfig, TrainConfig
+from pes.learn.config import OffPolicyConfig, TrainConfig
 from pes.learn.features import pursuer_obs
 from pes.learn.learner import Learner
 from pes.learn.nets import FlatObsMLP, PerAgent, RowScaled, mlp
@@ -58,27 +58,9 @@ from pes.sim.config import EnvConfig
 
 
 @dataclass
-class MAACConfig(LearnerConfig):
+class MAACConfig(OffPolicyConfig):
     """MAAC's settings: the paper's (§V-A) where they apply, MAAC's own 128 units and 4 heads."""
 
-    gamma: float = 0.95
-    """Discount factor."""
-    lr_actor: float = 1e-3
-    """Adam learning rate of the actors."""
-    lr_critic: float = 1e-3
-    """Adam learning rate of the two attention critics."""
-    tau: float = 1e-2
-    """Soft target update rate."""
-    buffer_size: int = 1_000_000
-    """Transitions kept in the replay buffer."""
-    batch_size: int = 512
-    """Minibatch of the updates."""
-    update_every: int = 50
-    """Collected transitions per update."""
-    warmup: int = 5000
-    """Transitions collected before the first update."""
-    grad_clip: float = 1.0
-    """Gradient norm clip (0 = none)."""
     hidden: int = 128
     """Units of the actors' hidden layers and of the critics' encoders and attention."""
     shared: bool = True
@@ -100,18 +82,9 @@ class MAACConfig(LearnerConfig):
     attend_reg: float = 1e-3
     """Weight of the squared attention logits in the critic loss (as the original)."""
 
-    POSITIVE: ClassVar[tuple[str, ...]] = (
-        "lr_actor",
-        "lr_critic",
-        "buffer_size",
-        "batch_size",
-        "update_every",
-        "hidden",
-        "attention_heads",
-    )
+    POSITIVE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.POSITIVE, "hidden", "attention_heads")
     NON_NEGATIVE: ClassVar[tuple[str, ...]] = (
-        "warmup",
-        "grad_clip",
+        *OffPolicyConfig.NON_NEGATIVE,
         "obstacle_scale",
         "target_scale",
         "alpha",

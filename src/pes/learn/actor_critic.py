@@ -29,7 +29,7 @@ from torch import Tensor, nn
 
 from pes.learn.buffer import ReplayBuffer, transition, transition_fields
 from pes.learn.common import masked_mean, optimise, soft_update, target_copy
-from pes.learn.config import LearnerConfig, TrainConfig
+from pes.learn.config import OffPolicyConfig, TrainConfig
 from pes.learn.features import pursuer_obs
 from pes.learn.learner import Learner
 from pes.learn.noise import OUNoise
@@ -39,27 +39,9 @@ from pes.sim.config import EnvConfig
 
 
 @dataclass
-class ActorCriticConfig(LearnerConfig):
+class ActorCriticConfig(OffPolicyConfig):
     """Settings every :class:`ActorCritic` reads (the paper's, §V-A, by default)."""
 
-    gamma: float = 0.95
-    """Discount factor."""
-    lr_actor: float = 1e-3
-    """Adam learning rate of the actor."""
-    lr_critic: float = 1e-3
-    """Adam learning rate of the critic."""
-    tau: float = 1e-2
-    """Soft target update rate."""
-    buffer_size: int = 1_000_000
-    """Transitions kept in the replay buffer."""
-    batch_size: int = 512
-    """Minibatch of the critic and actor updates (M)."""
-    update_every: int = 50
-    """Collected transitions per gradient update (the paper updates every 50)."""
-    warmup: int = 5000
-    """Transitions collected before the first update."""
-    grad_clip: float = 1.0
-    """Gradient norm clip (0 = none)."""
     action_reg: float = 1e-3
     """Weight of the squared pre-tanh action in the actor loss (MADDPG's regulariser)."""
     obstacle_scale: float = 20.0
@@ -68,16 +50,8 @@ class ActorCriticConfig(LearnerConfig):
     target_scale: float = 5.0
     """Factor on the vector to the evader (and on a predicted path) before the networks."""
 
-    POSITIVE: ClassVar[tuple[str, ...]] = (
-        "lr_actor",
-        "lr_critic",
-        "buffer_size",
-        "batch_size",
-        "update_every",
-    )
     NON_NEGATIVE: ClassVar[tuple[str, ...]] = (
-        "warmup",
-        "grad_clip",
+        *OffPolicyConfig.NON_NEGATIVE,
         "action_reg",
         "obstacle_scale",
         "target_scale",

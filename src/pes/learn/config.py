@@ -59,7 +59,37 @@ class LearnerConfig:
         """Method-specific checks beyond :meth:`validate`'s (none by default)."""
 
 
-RUN_KEYS_DOC = "the run's own keys (budget, logging, checkpoints, device)"
+@dataclass
+class OffPolicyConfig(LearnerConfig):
+    """The settings every replay learner reads (the paper's, §V-A, by default)."""
+
+    gamma: float = 0.95
+    """Discount factor."""
+    lr_actor: float = 1e-3
+    """Adam learning rate of the actor."""
+    lr_critic: float = 1e-3
+    """Adam learning rate of the critic."""
+    tau: float = 1e-2
+    """Soft target update rate."""
+    buffer_size: int = 1_000_000
+    """Transitions kept in the replay buffer."""
+    batch_size: int = 512
+    """Minibatch of the updates (M)."""
+    update_every: int = 50
+    """Collected transitions per gradient update (the paper updates every 50)."""
+    warmup: int = 5000
+    """Transitions collected before the first update."""
+    grad_clip: float = 1.0
+    """Gradient norm clip (0 = none)."""
+
+    POSITIVE: ClassVar[tuple[str, ...]] = (
+        "lr_actor",
+        "lr_critic",
+        "buffer_size",
+        "batch_size",
+        "update_every",
+    )
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("warmup", "grad_clip")
 
 
 @dataclass
