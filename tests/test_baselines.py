@@ -39,7 +39,7 @@ def test_gae_matches_a_hand_computation():
     assert adv[1, 0].item() == pytest.approx(2.0 - 1.0)  # cut: r - V, nothing bootstrapped
 
 
-def test_rollout_buffer_fills_clears_and_does_not_checkpoint_a_partial_rollout():
+def test_rollout_buffer_fills_clears_and_checkpoints_a_partial_rollout():
     buf = RolloutBuffer(3, 2, {"x": ((2,), torch.float32)})
     for i in range(3):
         assert not buf.full
@@ -47,9 +47,12 @@ def test_rollout_buffer_fills_clears_and_does_not_checkpoint_a_partial_rollout()
     assert buf.full and len(buf) == 6 and buf.data["x"][2, 1, 0] == 2.0
     with pytest.raises(RuntimeError, match="full"):
         buf.add(x=torch.zeros(2, 2))
+    buf.clear()
+    buf.add(x=torch.full((2, 2), 7.0))
     state = buf.state_dict()
-    buf.load_state_dict(state)
-    assert buf.filled == 0
+    other = RolloutBuffer(3, 2, {"x": ((2,), torch.float32)})
+    other.load_state_dict(state)  # a resumed run goes on with the rollout it had collected
+    assert other.filled == 1 and bool((other.data["x"][0] == 7.0).all())
     with pytest.raises(ValueError):
         RolloutBuffer(4, 2, {"x": ((2,), torch.float32)}).load_state_dict(state)
 

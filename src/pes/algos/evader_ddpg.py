@@ -235,10 +235,13 @@ class EvaderDDPG(Learner):
         return {"actor": self.actor}
 
     def state_dict(self) -> dict[str, Any]:
-        return {"noise": self.noise.state_dict()}
+        pursuers = getattr(self.pursuers, "state_dict", None)
+        return {"noise": self.noise.state_dict(), "pursuers": pursuers() if pursuers else None}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.noise.load_state_dict(state["noise"])
+        if state["pursuers"] is not None:
+            self.pursuers.load_state_dict(state["pursuers"])
 
     @classmethod
     def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device):

@@ -323,6 +323,13 @@ class MAAC(Learner):
         if self.demo is not None:
             self.demo.reset(done)
 
+    def state_dict(self) -> dict[str, Any]:
+        return {"demo": self.demo.state_dict() if self.demo is not None else None}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if self.demo is not None:
+            self.demo.load_state_dict(state["demo"])
+
     # --- learning --------------------------------------------------------------------------------
     def ready(self) -> bool:
         return len(self.buffer) >= max(self.lc.warmup, self.lc.batch_size)

@@ -313,10 +313,13 @@ class ActorCritic(Learner):
         return {"actor": self.actor}
 
     def state_dict(self) -> dict[str, Any]:
-        return {"noise": self.noise.state_dict()}
+        demo = self.demo.state_dict() if self.demo is not None else None
+        return {"noise": self.noise.state_dict(), "demo": demo}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.noise.load_state_dict(state["noise"])
+        if self.demo is not None:
+            self.demo.load_state_dict(state["demo"])
 
     @classmethod
     def build_policy(cls, cfg: TrainConfig, env_cfg: EnvConfig, device):

@@ -263,16 +263,20 @@ class RolloutBuffer:
         self.filled = 0
 
     def state_dict(self) -> dict:
-        return {"steps": self.steps, "num_envs": self.num_envs}
+        """The sizes and the rollout collected so far (a copy in host memory)."""
+        data = {k: v[: self.filled].to("cpu", copy=True) for k, v in self.data.items()}
+        return {"steps": self.steps, "num_envs": self.num_envs, "filled": self.filled, "data": data}
 
     def load_state_dict(self, state: dict) -> None:
-        """Check the sizes and start an empty rollout."""
+        """Check the sizes and restore the rollout collected so far."""
         if state["steps"] != self.steps or state["num_envs"] != self.num_envs:
             raise ValueError(
                 f"rollout of {state['steps']}x{state['num_envs']} steps cannot be loaded into one "
                 f"of {self.steps}x{self.num_envs}"
             )
-        self.clear()
+        self.filled = state["filled"]
+        for k, v in state["data"].items():
+            self.data[k][: self.filled] = v.to(self.data[k].device)
 
 
 def gae(

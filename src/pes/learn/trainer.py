@@ -19,10 +19,11 @@ A run lives in one folder::
     OUT/init_from.json   with ``init_from``: the checkpoint or policy file the networks started
                          from, which networks it gave and its counters
 
-``train(cfg, out, Learner, resume=True)`` continues from ``checkpoint.pt``: networks, optimisers,
-replay buffer, noise, RNG states and counters come back, ``progress.csv`` and TensorBoard are cut
-back to the checkpoint's last row, and ``best_policy.pt`` to the checkpoint's; environments start
-fresh episodes (the episodes in flight when the run stopped are not counted). SIGINT and SIGTERM
+``train(cfg, out, Learner, resume=True)`` continues from ``checkpoint.pt`` exactly as the run
+would have gone on: networks, optimisers, replay buffer, noise, RNG states, counters, the
+environments' episodes in flight and the log row being gathered come back; ``progress.csv`` and
+TensorBoard are cut back to the checkpoint's last row, and ``best_policy.pt`` to the
+checkpoint's. SIGINT and SIGTERM
 stop a run at the next step with a checkpoint, ``policy.pt`` and ``summary.json`` written.
 """
 
@@ -238,9 +239,6 @@ def train(
             opt.load_state_dict(ckpt["optimizers"][name])
         if "buffer" in ckpt:
             learner.buffer.load_state_dict(ckpt["buffer"])
-        learner.load_state_dict(ckpt["learner"])
-        torch.set_rng_state(ckpt["rng"]["torch"])
-        gen.set_state(ckpt["rng"]["sampler"])
         prog = Progress(**ckpt["progress"])
         learner.updates = prog.updates
         best_state = ckpt.get("best_policy")
@@ -281,6 +279,19 @@ def train(
             payload["best_policy"] = best_state
         if cfg.checkpoint_buffer and hasattr(learner, "buffer"):
             payload["buffer"] = learner.buffer.state_dict()
+        # the episodes in flight and the log row being gathered, so that a resumed run goes
+        # on exactly as the run would have
+        payload["live"] = {
+            "env": {k: v.cpu() for k, v in env.get_state().items()},
+            "obs": obs.cpu(),
+            "info": {k: v.cpu() for k, v in info.items()},
+            "reward_sum": reward_sum.cpu(),
+            "window": window,
+            "demo_in_row": demo_in_row,
+            "stats_sum": stats_sum,
+            "stats_count": stats_count,
+            "next_row": next_row,
+        }
         save_atomic(payload, ckpt_path)
 
     def meta() -> dict[str, Any]:
@@ -298,8 +309,8 @@ def train(
         return save_policy_file(path, cfg.algo, to_dict(cfg), to_dict(env_cfg), policy, info)
 
     def start_env():
-        """The training environments, every episode fresh: at a (re)start, seeded by the
-        episodes already played, and when the crash rule switches."""
+        """The training environments, every episode fresh: at a start, seeded by the episodes
+        already played, and when the crash rule switches."""
         crash_mode = "disable" if prog.crashes_disable else env_cfg.crash_mode
         env = make_env(
             env_cfg.replace(crash_mode=crash_mode),
@@ -322,11 +333,23 @@ def train(
     stats_sum: dict[str, float] = {}
     stats_count: dict[str, int] = {}
     reward_sum = torch.zeros(cfg.num_envs, device=device)
+    next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
+    if resume:  # the run goes on where its checkpoint was written
+        live = ckpt["live"]
+        env.set_state(live["env"])
+        obs = live["obs"].to(device)
+        info = {k: v.to(device) for k, v in live["info"].items()}
+        reward_sum = live["reward_sum"].to(device)
+        window, demo_in_row = live["window"], live["demo_in_row"]
+        stats_sum, stats_count = live["stats_sum"], live["stats_count"]
+        next_row = live["next_row"]
+        learner.load_state_dict(ckpt["learner"])
+        torch.set_rng_state(ckpt["rng"]["torch"])
+        gen.set_state(ckpt["rng"]["sampler"])
     start = time.perf_counter()
     wall0 = prog.wall_s
     last_ckpt = start
     row_start = (start, prog.env_steps, prog.updates)
-    next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
     deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
     bar = tqdm(
         total=cfg.episodes,

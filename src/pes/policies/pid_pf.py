@@ -148,6 +148,17 @@ class PIDPotentialField:
         rest = rest * torch.clamp(room / rest.norm(dim=-1, keepdim=True).clamp(min=1e-6), max=1.0)
         return brake * nearest + rest
 
+    MEMORY = ("integral", "last_error", "fresh", "last_evader")
+    """What the controller remembers between steps, each (E, ...) or None before the first."""
+
+    def state_dict(self) -> dict[str, Tensor | None]:
+        """What it remembers between steps (a checkpoint of a run it demonstrates in)."""
+        return {name: getattr(self, name) for name in self.MEMORY}
+
+    def load_state_dict(self, state: dict[str, Tensor | None]) -> None:
+        for name in self.MEMORY:
+            setattr(self, name, state[name])
+
     def reset(self, mask: Tensor | None = None) -> None:
         if self.integral is None:
             return
