@@ -131,7 +131,8 @@ def test_render_mp4_and_png(tmp_path, capsys):
 
 
 def test_render_test_conditions(tmp_path):
-    """pes render plays pes eval's scenario: --damaged and --disturbance reach the episode."""
+    """pes render plays the paper's evaluation scenario, as pes demo: disturbance on unless
+    --no-disturbance; --damaged reaches the episode."""
     path = tmp_path / "ep.json"
     argv = ["render", "--policy", "pid-pf", "--out", str(path), "--set", "max_steps=5"]
     assert main([*argv, "--damaged", "2", "--disturbance"]) == 0
@@ -140,7 +141,9 @@ def test_render_test_conditions(tmp_path):
     assert sum(not alive for alive in record["frames"][0]["alive"]) >= 2
     assert main(argv) == 0
     record = load_record(path)
-    assert record["config"]["damaged"] == 0 and record["config"]["disturbance"] is False
+    assert record["config"]["damaged"] == 0 and record["config"]["disturbance"] is True
+    assert main([*argv, "--no-disturbance"]) == 0
+    assert load_record(path)["config"]["disturbance"] is False
 
 
 def test_bench(capsys):

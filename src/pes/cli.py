@@ -138,8 +138,9 @@ def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "
     return record_episode(policy, config, seed=seed, device=device)
 
 
-def _add_test_options(p: argparse.ArgumentParser) -> None:
-    """--damaged and --disturbance, the paper's test conditions (pes eval, pes render)."""
+def _add_test_options(p: argparse.ArgumentParser, disturbance: bool = False) -> None:
+    """--damaged and --disturbance, the paper's test conditions (pes eval, pes render; the
+    disturbance is on by default where ``disturbance``)."""
     p.add_argument(
         "--damaged",
         type=_non_negative,
@@ -148,8 +149,11 @@ def _add_test_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--disturbance",
-        action="store_true",
-        help="random 5 %% weight pushes (the paper's evaluation setting)",
+        action=argparse.BooleanOptionalAction,
+        default=disturbance,
+        help="random 5 %% weight pushes (the paper's evaluation setting; default: "
+        + ("on, as pes demo" if disturbance else "off")
+        + ")",
     )
 
 
@@ -563,7 +567,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=2,
         help="GIF/MP4: draw every K-th step (default: 2)",
     )
-    _add_test_options(p)
+    _add_test_options(p, disturbance=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_render)
