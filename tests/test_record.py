@@ -83,6 +83,22 @@ def test_gif_frames_change(tmp_path):
         assert image.n_frames == 6
 
 
+def test_the_header_has_a_legend_naming_the_predictions_where_there_are_some():
+    """The orange dots are explained in the header, and only where the policy predicted."""
+    from pes.record.render import PREDICTION
+
+    with_pred = _record()
+    without = dict(
+        with_pred, frames=[{k: v for k, v in f.items() if k != "pred"} for f in with_pred["frames"]]
+    )
+
+    def header_has_orange(record) -> bool:
+        header = np.asarray(next(iter(render_frames(record))))[:40]
+        return bool((np.abs(header.astype(int) - PREDICTION).sum(-1) < 30).any())
+
+    assert header_has_orange(with_pred) and not header_has_orange(without)
+
+
 def test_mp4_decodes_to_the_rendered_frames(tmp_path):
     import imageio.v2 as imageio
     import numpy as np
@@ -97,7 +113,7 @@ def test_mp4_decodes_to_the_rendered_frames(tmp_path):
         reader.close()
     assert len(frames) == 6 + 5  # steps 0, 5, ..., 25, then the last held 0.5 s at 10 fps
     rendered = [np.asarray(image, dtype=float) for image in render_frames(record, every=5)]
-    assert frames[0].shape == rendered[0].shape == (628, 600, 3)
+    assert frames[0].shape == rendered[0].shape == (640, 600, 3)  # a 40-pixel header
     # Lossy, but each decoded frame is nearest to the picture it encodes (the held ones: the
     # last), and near it.
     for k, frame in enumerate(frames):

@@ -66,6 +66,20 @@ def _base(record: dict[str, Any], view: _View) -> Image.Image:
     return image
 
 
+def _legend(draw: ImageDraw.ImageDraw, font, predictions: bool) -> None:
+    """The header's second line: what each colour means (the predicted evader positions only
+    where the policy made them)."""
+    items = [(PURSUER, "pursuer"), (EVADER, "evader, its capture radius")]
+    if predictions:
+        items.append((PREDICTION, "TP Net's predicted evader positions"))
+    items.append((DEAD, "x: disabled pursuer"))
+    x, y = 8.0, 26.0
+    for colour, label in items:
+        _circle(draw, (x + 4, y + 5), 4, fill=colour + (255,))
+        draw.text((x + 12, y), label, fill=TEXT, font=font)
+        x += 12 + draw.textlength(label, font=font) + 14
+
+
 def render_frames(
     record: dict[str, Any], size: int = 600, trail: int = 30, every: int = 1
 ) -> Iterator[Image.Image]:
@@ -78,10 +92,11 @@ def render_frames(
     if not frames:
         raise PESError("the episode record has no frames")
     n = sum(1 for a in record["agents"] if a["role"] == "pursuer")
-    header = 28
+    header = 40
     view = _View(record["arena"], size, header)
     base = _base(record, view)
     font = ImageFont.load_default()
+    _legend(ImageDraw.Draw(base, "RGBA"), font, any(f.get("pred") for f in frames))
     vehicle_px = max(4.0, record.get("body_radius", 0.3) * view.scale * 2)
     capture_px = record.get("capture_radius", 2.0) * view.scale
     indices = list(range(0, len(frames), every))
