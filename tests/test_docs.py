@@ -24,3 +24,6 @@ def test_readme_starts_with_the_two_commands():
     assert "pes demo" in head and "pytest" in head
     ci = (ROOT / ".ci" / "run").read_text()
     assert "pytest" in ci
+    # the extras' resolution must not replace the CPU build of torch with a CUDA one
+    install = 'pip install torch==2.13.0 && pip install torch==2.13.0 -e ".[test,benchmarl]"'
+    assert install in head and install in ci
