@@ -563,3 +563,32 @@ def test_sigkill_at_random_moments_resumes_exactly(algo, tmp_path):
         for key, value in state.items():
             assert torch.equal(mine[name][key], value), (name, key)
     assert not list(out.glob(".*.tmp"))  # a killed writer's temporary files are gone
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_stops_the_run_with_its_files_written(sig, tmp_path):
+    """Ctrl-C (SIGINT) or SIGTERM: the run stops at its next step with a checkpoint, policy.pt
+    and summary.json written, exits with 130 and one line, and --resume finishes it."""
+    out = tmp_path / "run"
+    argv = [sys.executable, "-m", "pes.cli", "train", "--algo", "cbc-tp", "--preset", "tiny"]
+    for text in ("compile_env=false", "tensorboard=false", "episodes=400", "eval_episodes=0"):
+        argv += ["--set", text]
+    proc = subprocess.Popen(
+        [*argv, "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    while proc.poll() is None and not (out / "config.yaml").is_file():
+        time.sleep(0.05)
+    time.sleep(1.0)  # into the training loop
+    proc.send_signal(sig)
+    _, err = proc.communicate()
+    assert proc.returncode == 130, err
+    last = err.strip().splitlines()[-1]  # after the progress bar, one line
+    assert last.startswith("stopped:") and "--resume" in last and "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stopped_by"] == "interrupted" and summary["episodes"] < 400
+    assert (out / "checkpoint.pt").is_file() and (out / "policy.pt").is_file()
+    done = subprocess.run(
+        [*argv, "--set", "episodes=16", "--out", str(out), "--resume"], capture_output=True
+    )
+    assert done.returncode == 0
