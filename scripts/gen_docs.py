@@ -66,6 +66,12 @@ def _learner_table(algo: str) -> str:
     return "\n".join(lines)
 
 
+def _run_keys_table() -> str:
+    """The run's keys; its ``protocol`` and ``learner`` sections are described beside it."""
+    rows = field_table(TrainConfig).splitlines()
+    return "\n".join(r for r in rows if not r.startswith(("| `protocol`", "| `learner`")))
+
+
 ALGO_PAGES = {
     "cbc-tp": "cbc_tp",
     "cbc": "cbc_tp",
@@ -81,7 +87,7 @@ ALGO_PAGES = {
 GENERATED = {
     ("docs/scenario.md", "config-table"): lambda: field_table(EnvConfig),
     ("docs/scenario.md", "calibration"): _calibration_table,
-    ("docs/training.md", "train-config"): lambda: field_table(TrainConfig),
+    ("docs/training.md", "train-config"): lambda: _run_keys_table(),
     **{
         (f"docs/algorithms/{page}.md", f"settings-{algo}"): (lambda a=algo: _learner_table(a))
         for algo, page in ALGO_PAGES.items()

@@ -88,7 +88,13 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     folder = Path(out) / "trials" / spec["id"]
     done = folder / "result.json"
     if done.is_file():
-        return json.loads(done.read_text())
+        record = json.loads(done.read_text())
+        if record["spec"] != spec:
+            raise ConfigError(
+                f"'{folder}' holds a trial run with other settings ({record['spec']}); "
+                "choose another --out"
+            )
+        return record
     folder.mkdir(parents=True, exist_ok=True)
     values = {
         **spec["values"],
