@@ -749,8 +749,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--minutes",
         type=_positive_float,
-        default=10.0,
-        help="training minutes per trial (default: 10)",
+        default=30.0,
+        help="training minutes per trial (default: 30; under the pes protocol a trial must "
+        "outlast its 100,000 demonstration transitions)",
     )
     p.add_argument(
         "--eval-episodes",

@@ -1,6 +1,6 @@
 """``pes tune``: the same hyper-parameter search for any learner (SPEC §3, "fair comparison").
 
-    pes tune --algo maddpg --trials 8 --minutes 10 --out results/tuning/maddpg
+    pes tune --algo maddpg --trials 8 --minutes 30 --out results/tuning/maddpg
 
 A search samples ``trials`` settings of the learner's :attr:`~pes.learn.learner.Learner.
 TUNE_SPACE` (two to four keys: learning rates, exploration or entropy, batch size, network
@@ -137,7 +137,7 @@ def score(result: dict[str, Any]) -> float:
 def tune(
     algo: str,
     trials: int = 8,
-    minutes: float = 10.0,
+    minutes: float = 30.0,
     eval_episodes: int = 200,
     protocol: str = "pes",
     seed: int = 0,
