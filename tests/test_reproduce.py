@@ -129,3 +129,26 @@ def test_user_mistakes(tmp_path, capsys):
     argv = ["reproduce", "table4", "--budget", "tiny", "--out", str(tmp_path), "--no-ray"]
     assert main([*argv, "--methods", "nope"]) == 2
     assert "unknown method 'nope'" in capsys.readouterr().err
+
+
+def test_tune_scores_every_trial_resumes_and_refuses_other_settings(tmp_path):
+    """pes tune's machinery on the tiny preset: trial t00 is the preset, the others sampled
+    settings; the report lists both; a second call finds them done; other minutes are refused."""
+    from pes.errors import ConfigError
+    from pes.experiments.tune import tune
+
+    kwargs = dict(trials=2, minutes=0.02, eval_episodes=2, preset="tiny", use_ray=False)
+    summary = tune("ppo", out=tmp_path, progress=False, **kwargs)
+    assert summary["finished"] == 2 and len(summary["results"]) == 2
+    values = {r["id"]: r["values"] for r in summary["results"]}
+    assert values["t00"] == {} and set(values["t01"]) == {
+        "lr_actor",
+        "lr_critic",
+        "ent_coef",
+        "hidden",
+    }
+    assert "t01" in (tmp_path / "README.md").read_text()
+    again = tune("ppo", out=tmp_path, progress=False, **kwargs)
+    assert again["results"] == summary["results"]
+    with pytest.raises(ConfigError, match="other settings"):
+        tune("ppo", out=tmp_path, progress=False, **dict(kwargs, minutes=0.05))

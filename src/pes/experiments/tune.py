@@ -53,7 +53,13 @@ def sample(space: dict[str, tuple], rng: random.Random) -> dict[str, Any]:
 
 
 def make_tune_trials(
-    algo: str, trials: int, minutes: float, eval_episodes: int, protocol: str, seed: int
+    algo: str,
+    trials: int,
+    minutes: float,
+    eval_episodes: int,
+    protocol: str,
+    seed: int,
+    preset: str = "quick",
 ) -> list[dict]:
     """The trial specs of a search (JSON-friendly dicts): trial 0 the quick preset, the others
     random settings of the learner's search space, drawn from ``seed``."""
@@ -66,11 +72,12 @@ def make_tune_trials(
     specs = []
     for k in range(trials):
         values = {} if k == 0 else sample(cls.TUNE_SPACE, rng)
-        build_train_config(algo, "quick", dict(values), protocol=protocol)  # checks the values
+        build_train_config(algo, preset, dict(values), protocol=protocol)  # checks the values
         specs.append(
             {
                 "id": f"t{k:02d}",
                 "algo": algo,
+                "preset": preset,
                 "values": values,
                 "minutes": minutes,
                 "eval_episodes": eval_episodes,
@@ -82,18 +89,28 @@ def make_tune_trials(
     return specs
 
 
+def finished(out: Path, spec: dict) -> dict[str, Any] | None:
+    """The result of trial ``spec`` in ``out`` if it has finished (None if not); a trial of the
+    same id run with other settings is a one-line error."""
+    done = Path(out) / "trials" / spec["id"] / "result.json"
+    if not done.is_file():
+        return None
+    record = json.loads(done.read_text())
+    if record["spec"] != spec:
+        raise ConfigError(
+            f"'{done.parent}' holds a trial run with other settings ({record['spec']}); "
+            "choose another --out"
+        )
+    return record
+
+
 def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     """Train and score one trial in ``out/trials/<id>`` (resumed from its checkpoint if one is
     there); returns its ``result.json`` contents."""
     folder = Path(out) / "trials" / spec["id"]
     done = folder / "result.json"
-    if done.is_file():
-        record = json.loads(done.read_text())
-        if record["spec"] != spec:
-            raise ConfigError(
-                f"'{folder}' holds a trial run with other settings ({record['spec']}); "
-                "choose another --out"
-            )
+    record = finished(out, spec)
+    if record is not None:
         return record
     folder.mkdir(parents=True, exist_ok=True)
     values = {
@@ -105,7 +122,7 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
         "threads": threads or 1,
         "log_every": 50,
     }
-    cfg = build_train_config(spec["algo"], "quick", values, protocol=spec["protocol"])
+    cfg = build_train_config(spec["algo"], spec["preset"], values, protocol=spec["protocol"])
     run = folder / "run"
     summary_path = run / "summary.json"
     stopped = json.loads(summary_path.read_text())["stopped_by"] if summary_path.is_file() else ""
@@ -147,16 +164,18 @@ def tune(
     parallel: int = 0,
     progress: bool = True,
     command: str = "",
+    preset: str = "quick",
 ) -> dict[str, Any]:
     """Run (or finish) the search of ``algo`` into ``out`` and write its report; returns a
-    summary with every finished trial, best first."""
+    summary with every finished trial, best first. ``preset`` is the budget each trial trains
+    (``quick``; ``tiny`` for tests)."""
     if algo not in ALGOS:
         raise ConfigError(f"algo must be one of {', '.join(ALGOS)}, got '{algo}'")
-    specs = make_tune_trials(algo, trials, minutes, eval_episodes, protocol, seed)
+    specs = make_tune_trials(algo, trials, minutes, eval_episodes, protocol, seed, preset)
     out = Path(out or f"results/tuning/{algo}")
     out.mkdir(parents=True, exist_ok=True)
     use_ray = choose_runner(use_ray, ray_address)
-    todo = [s for s in specs if not (out / "trials" / s["id"] / "result.json").is_file()]
+    todo = [s for s in specs if finished(out, s) is None]
     start = time.time()
     view = SweepProgress(len(specs), len(specs) - len(todo), progress and bool(todo), "tune")
     try:

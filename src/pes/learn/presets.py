@@ -11,6 +11,7 @@ QUICK_RUN: dict[str, Any] = dict(num_envs=32, time_limit=60.0, env=dict(evader_p
 """Run keys of every method's ``quick`` preset (its episodes are the method's own)."""
 
 TINY_RUN: dict[str, Any] = dict(
+    compile_env=False,  # compiling the step costs more than a tiny run saves by it
     episodes=40,
     num_envs=8,
     log_every=10,
