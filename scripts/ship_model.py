@@ -44,7 +44,6 @@ from pes.experiments.calibration import (  # noqa: E402
 from pes.learn.checkpoint import (  # noqa: E402
     CHECKPOINT_FORMAT,
     POLICY_FORMAT,
-    VERSION,
     load_file,
     save_policy_file,
 )
@@ -189,7 +188,7 @@ def main() -> None:
         f"# Model card: `{args.name}`",
         "",
         f"File: `src/pes/models/{SHIPPED[args.name]}` (a PES policy file, format version "
-        f"{VERSION}).",
+        f"{load_file(target, POLICY_FORMAT)['version']}).",
         "",
         "## How it was trained",
         "",

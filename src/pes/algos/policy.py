@@ -52,11 +52,14 @@ def recorded_config(obj: dict[str, Any], path: Path) -> TrainConfig:
             "preset": str(values.get("preset", "quick")),
         }
     try:
-        return train_config_from_dict(values, cls.Config)
+        cfg = train_config_from_dict(values, cls.Config)
     except ConfigError as exc:
         raise CheckpointError(
             f"'{path}' holds an unreadable training configuration: {exc}"
         ) from None
+    if obj.get("version") == 1:
+        cfg.protocol.name = "unrecorded"  # its aids were flat keys, dropped above
+    return cfg
 
 
 def _read(spec: str | Path) -> tuple[Path, dict, TrainConfig, dict]:
