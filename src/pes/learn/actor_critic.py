@@ -21,6 +21,7 @@ Q (B, N).
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -132,14 +133,14 @@ class ActorCritic(Learner):
 
     # --- what a method provides -----------------------------------------------------------------
     @staticmethod
+    @abstractmethod
     def make_actor(lc: Any, num_pursuers: int) -> nn.Module:
         """The actor (see the module docstring for its interface)."""
-        raise NotImplementedError
 
     @staticmethod
+    @abstractmethod
     def make_critic(lc: Any, num_pursuers: int) -> nn.Module:
         """The critic (see the module docstring for its interface)."""
-        raise NotImplementedError
 
     def make_policy(self) -> DeterministicPolicy:
         """The acting policy over :attr:`actor`."""

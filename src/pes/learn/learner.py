@@ -7,6 +7,7 @@ learner reads, its presets, and a :class:`Learner` subclass; one line of
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import torch
@@ -20,7 +21,7 @@ ENV_AIDS = ("reward", "disturbance", "crash_curriculum", "speed_curriculum")
 """Aids the training loop applies to the environments, the same for every learner."""
 
 
-class Learner:
+class Learner(ABC):
     """A learner as the training loop drives it.
 
     Per vector step the loop calls :meth:`act`, steps the environments, then :meth:`record`;
@@ -87,14 +88,15 @@ class Learner:
         return env_cfg
 
     # --- acting ----------------------------------------------------------------------------------
+    @abstractmethod
     def act(
         self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen: torch.Generator
     ) -> tuple[Tensor, Tensor | None]:
         """Actions for one vector step: the pursuers' (E, N, 2) in [-1, 1] and the evader's
         (E, 2) or None (the environment's evader plays). ``noise_scale`` is the protocol's
         exploration scale now."""
-        raise NotImplementedError
 
+    @abstractmethod
     def record(
         self,
         before: dict[str, Tensor],
@@ -106,30 +108,29 @@ class Learner:
     ) -> None:
         """Store one vector step: ``before``/``after`` are the infos around ``env.step``,
         ``reward`` (E, N), ``terminated`` (E,)."""
-        raise NotImplementedError
 
-    def episode_reset(self, done: Tensor) -> None:
+    def episode_reset(self, done: Tensor) -> None:  # noqa: B027 - a hook, nothing by default
         """The environments ``done`` (E,) bool start new episodes."""
 
     def demonstrating(self) -> bool:
         """Whether a demonstrator, not the learner, plays the next step."""
         return False
 
-    def on_restart(self) -> None:
+    def on_restart(self) -> None:  # noqa: B027 - a hook, nothing by default
         """The environments restart (every episode abandoned): drop what spans them."""
 
     # --- learning --------------------------------------------------------------------------------
+    @abstractmethod
     def ready(self) -> bool:
         """Whether :meth:`update` may run."""
-        raise NotImplementedError
 
     def update_credit(self) -> float:
         """Updates earned by one vector step once :meth:`ready` (on-policy: one per rollout)."""
         return 1.0
 
+    @abstractmethod
     def update(self, gen: torch.Generator) -> dict[str, float]:
         """One update; returns its metrics (log columns)."""
-        raise NotImplementedError
 
     @staticmethod
     def score(success_rate: float, episode_steps: float) -> float:
@@ -137,33 +138,33 @@ class Learner:
         return success_rate - 1e-5 * episode_steps
 
     # --- saving ----------------------------------------------------------------------------------
+    @abstractmethod
     def modules(self) -> dict[str, nn.Module]:
         """Every network, by name (checkpoints)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
         """Every optimiser, by name (checkpoints)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def policy_modules(self) -> dict[str, nn.Module]:
         """What a deployed policy needs (policy files hold only these)."""
-        raise NotImplementedError
 
     def state_dict(self) -> dict[str, Any]:
         """What a checkpoint holds besides networks and optimisers (buffer contents and noise
         state are saved by the loop)."""
         return {}
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027 - a hook, nothing by default
         """Restore :meth:`state_dict`."""
 
     @classmethod
+    @abstractmethod
     def build_policy(
         cls, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device | str
     ) -> tuple[nn.Module, dict[str, nn.Module]]:
         """An untrained policy of this architecture for ``env_cfg``, and its modules by name
         (what a policy file's ``policy`` loads into)."""
-        raise NotImplementedError
 
     @staticmethod
     def fixed_swarm(cfg: TrainConfig) -> str | None:
