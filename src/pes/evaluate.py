@@ -67,6 +67,19 @@ def _outcome(info: dict, terminated: torch.Tensor, i: int) -> str:
     return "lost" if bool(terminated[i]) else "timeout"
 
 
+def _act_on(policy: Policy, obs: torch.Tensor, info: dict, rows: torch.Tensor) -> torch.Tensor:
+    """The (E, N, 2) actions of a row-wise ``policy`` computed for the environments ``rows``
+    (E,) bool only; the other environments get zero actions."""
+    index = torch.nonzero(rows).flatten()
+    sub_info = {
+        k: v.index_select(0, index) if torch.is_tensor(v) and v.dim() and len(v) == len(rows) else v
+        for k, v in info.items()
+    }
+    actions = torch.zeros(*obs.shape[:2], 2, device=obs.device)
+    actions[index] = policy(obs.index_select(0, index), sub_info)
+    return actions
+
+
 def episode_quota(episodes: int, num_envs: int) -> torch.Tensor:
     """(num_envs,) long: how many of ``episodes`` each environment of :func:`evaluate` plays
     and counts (the first ``episodes % num_envs`` one more); it keeps stepping past its share
@@ -110,12 +123,19 @@ def evaluate(
 
     obs, info = env.reset(seed=seed)
     policy.reset(None)
+    # A row-wise policy acts only for the environments still playing their share: the others
+    # step on, idle, while the slowest finish (most of the work of a long tail).
+    subset = bool(getattr(policy, "row_wise", False)) and on_step is None
     reward_sum = torch.zeros(num_envs, device=env.device)
     bar = tqdm(total=episodes, desc="episodes", unit="ep", disable=not progress, leave=False)
-    with torch.no_grad():
+    with torch.inference_mode():
         while bool((finished < quota).any()):
             alive = info["obs_mask"][:, :, 0].float()  # pursuers alive at the step start
-            actions = policy(obs, info)
+            playing = finished < quota
+            if subset and not bool(playing.all()):
+                actions = _act_on(policy, obs, info, playing.to(env.device))
+            else:
+                actions = policy(obs, info)
             obs, reward, terminated, truncated, info = env.step(actions)
             team = (reward * alive).sum(-1) / alive.sum(-1).clamp(min=1.0)
             reward_sum += team

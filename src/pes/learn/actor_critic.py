@@ -63,6 +63,8 @@ class DeterministicPolicy(nn.Module):
     """A trained actor as a :class:`pes.policies.Policy`: ``actor(obs, info["obs_mask"],
     None)``."""
 
+    row_wise = True  # see pes.policies.Policy
+
     def __init__(self, actor: nn.Module) -> None:
         super().__init__()
         self.actor = actor

@@ -54,6 +54,8 @@ class ActorPolicy(nn.Module):
     """A trained pursuer actor as a :class:`pes.policies.Policy`, acting deterministically:
     ``actor.mean_action(obs (E, N, N, 8), mask (E, N, N))`` gives the (E, N, 2) actions."""
 
+    row_wise = True  # see pes.policies.Policy
+
     def __init__(self, actor: nn.Module) -> None:
         super().__init__()
         self.actor = actor

@@ -14,6 +14,10 @@ class Policy(Protocol):
     ``reset``/``step`` (``info["obs_mask"]`` marks the real rows); returns (E, N, 2) actions in
     [-1, 1]. ``reset(mask)``: forget what was remembered for the environments where ``mask``
     (E,) is true (all of them when ``mask`` is None), because a new episode starts there.
+
+    A policy may set ``row_wise = True`` when environment ``i``'s actions depend on row ``i``
+    of ``obs`` and ``info`` alone and it keeps no state between calls: the evaluation harness
+    then calls it on the environments that are still playing only.
     """
 
     def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor: ...

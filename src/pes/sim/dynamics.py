@@ -21,6 +21,8 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
+from pes.sim import kernels
+
 GRAVITY = 9.81  # m/s^2
 
 
@@ -168,6 +170,13 @@ def quadrotor_step(
     gyro_yaw = (p.ixx - p.iyy) / p.izz
     fx, fy = fx / p.mass, fy / p.mass
     max_speed = p.max_speed
+    if kernels.available(v.x):  # the same arithmetic, compiled (pes.sim.kernels)
+        gyro = torch.stack([gyro_roll, gyro_pitch, gyro_yaw])
+        state = torch.stack(v[:13])
+        out = kernels.quadrotor_substeps(
+            state, roll_ref, pitch_ref, fx, fy, gyro, max_speed, h, b, p.kp, p.ki, p.kd, substeps
+        )
+        return Vehicles(*out.unbind(0), *v[13:])
 
     def substep(
         x,
