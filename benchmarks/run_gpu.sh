@@ -55,6 +55,6 @@ timeout "$(lim 50)" python3 -m pes.cli train --algo cbc-tp --set device=cuda --s
     >"$OUT/train_quick_cuda_resumed.json" 2>>"$LOG"
 cp "$RUN/q/progress.csv" "$OUT/train_quick_cuda_progress.csv" 2>/dev/null
 part bench-sim
-timeout "$(lim 100)" python3 benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 \
+timeout "$(lim 100)" python3 benchmarks/bench_sim.py --device cuda --compiled --sizes 4096 65536 262144 \
     --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
 part done

@@ -97,3 +97,31 @@ def test_failures_split_into_a_lost_swarm_and_the_step_limit():
         assert (outcome == "timeout") == (steps == 60)
     rates = result.success_rate + result.lost_rate + result.timeout_rate
     assert abs(rates - 1.0) < 1e-9 and 0 < result.lost_rate < 1
+
+
+class _Chase:
+    """A row-wise policy: every pursuer heads for the evader (obs row 0, features 6-7); it
+    records the batch sizes it is called with."""
+
+    def __init__(self, row_wise: bool) -> None:
+        self.row_wise = row_wise
+        self.batches: list[int] = []
+
+    def __call__(self, obs, info):
+        self.batches.append(obs.shape[0])
+        return torch.tanh(obs[:, :, 0, 6:8] * 20.0)
+
+    def reset(self, mask=None) -> None:
+        pass
+
+
+def test_a_row_wise_policy_acts_only_for_the_environments_still_playing():
+    """Environments that have played their share step on idle: a row-wise policy is called
+    on the others only, and the measured episodes are exactly those of the full batch."""
+    cfg = pes.EnvConfig(evader_policy="random", max_steps=60)
+    results = {}
+    for row_wise in (False, True):
+        policy = _Chase(row_wise)
+        results[row_wise] = evaluate(policy, cfg, episodes=13, num_envs=4, seed=3)
+        assert (min(policy.batches) < 4) == row_wise
+    assert results[True].per_episode == results[False].per_episode

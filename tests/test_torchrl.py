@@ -279,3 +279,44 @@ def test_benchmarl_hydra_config_and_log_info():
     td["next", "done"][:, -1] = True
     td["next", "success"][0, -1] = True
     assert PESClass.log_info(td) == {"collection/success_rate": 0.5}
+
+
+@pytest.mark.parametrize("algorithm", ["Mappo", "Maddpg"])
+def test_pes_eval_measures_a_benchmarl_checkpoint(tmp_path, algorithm, capsys):
+    """A BenchMARL experiment's checkpoint is a ``pes eval --policy``: its deterministic
+    policy, measured with PES's own evaluation."""
+    import json
+
+    from pes.cli import main, make_policy
+
+    experiment = tiny_experiment(tmp_path, "default", algorithm)
+    experiment.config.checkpoint_at_end = True
+    experiment.run()
+    (checkpoint,) = tmp_path.glob("*/checkpoints/checkpoint_*.pt")
+    scenario = ["--set", "num_pursuers=3", "--set", "capture_count=2", "--set", "max_steps=20"]
+    assert main(["eval", "--policy", str(checkpoint), "--episodes", "3", "--json", *scenario]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["episodes"] == 3 and result["policy"] == str(checkpoint)
+
+    config = pes.EnvConfig(num_pursuers=3, capture_count=2, max_steps=20)
+    policy = make_policy(str(checkpoint), config)
+    env = pes.make_env(config, num_envs=4, seed=0)
+    obs, info = env.reset(seed=0)
+    actions = policy(obs, info)
+    assert actions.shape == (4, 3, 2) and actions.abs().max() <= 1.0
+    assert torch.equal(actions, policy(obs, info))  # no exploration noise
+    with pytest.raises(pes.errors.ConfigError, match="trained with 3 pursuers"):
+        make_policy(str(checkpoint), pes.EnvConfig())
+
+
+def test_torchrl_policy_refuses_a_recurrent_module():
+    from tensordict.nn import TensorDictModule
+
+    from pes.torchrl import TorchRLPolicy
+
+    module = TensorDictModule(
+        lambda obs, h: obs[..., :2], [(GROUP, "observation"), (GROUP, "_hidden")],
+        [(GROUP, "action")],
+    )  # fmt: skip
+    with pytest.raises(pes.errors.ConfigError, match="stateless"):
+        TorchRLPolicy(module)

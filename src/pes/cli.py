@@ -122,11 +122,26 @@ def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"
 
     if name in SCRIPTED:
         return SCRIPTED[name](config, seed=seed)
+    if _is_benchmarl_checkpoint(name):
+        from pes.benchmarl.policy import load_benchmarl_policy
+
+        return load_benchmarl_policy(name, config)
     if is_policy_spec(name):
         return load_pursuer_policy(name, config, device)[0]
     known = ", ".join([*SCRIPTED, "cbc-tp"])
     raise ConfigError(
         f"unknown policy '{name}' (available: {known}, or a policy file / checkpoint path)"
+    )
+
+
+def _is_benchmarl_checkpoint(name: str) -> bool:
+    """A BenchMARL experiment's ``checkpoints/*.pt`` (see :mod:`pes.benchmarl.policy`), told
+    apart without importing BenchMARL."""
+    path = Path(name)
+    return (
+        path.suffix == ".pt"
+        and path.parent.name == "checkpoints"
+        and (path.parent.parent / "config.pkl").is_file()
     )
 
 
@@ -136,6 +151,27 @@ def _run_episode(config: EnvConfig, policy_name: str, seed: int, device: str = "
 
     policy = make_policy(policy_name, config, seed=seed, device=device)
     return record_episode(policy, config, seed=seed, device=device)
+
+
+def _progress_line(text: str) -> None:
+    """One line of progress on stderr (stdout carries --json's object alone)."""
+    print(text, file=sys.stderr, flush=True)
+
+
+def _add_threads_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--threads",
+        type=_positive,
+        default=1,
+        help="torch CPU threads (default: 1, which holds its speed when other work shares "
+        "the cores; more help only on otherwise idle cores, see docs/performance.md)",
+    )
+
+
+def _set_threads(threads: int) -> None:
+    import torch
+
+    torch.set_num_threads(threads)
 
 
 def _add_test_options(p: argparse.ArgumentParser, disturbance: bool = False) -> None:
@@ -212,6 +248,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from pes.evaluate import evaluate
 
     config = _test_scenario(args)
+    _set_threads(args.threads)
     policy = make_policy(args.policy, config, seed=args.seed, device=args.device)
     start = time.time()
     result = evaluate(
@@ -221,7 +258,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         num_envs=args.num_envs,
         seed=args.seed,
         device=args.device,
-        progress=not args.json,
+        progress=True,  # a bar on stderr; --json's object alone goes to stdout
     )
     summary = {
         "policy": args.policy,
@@ -360,13 +397,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from pes.sim.bench import run_benchmark
 
     config = _scenario(args)
+    _set_threads(args.threads)
     results = run_benchmark(
         config,
         args.num_envs,
         device=args.device,
         steps=args.steps,
         compile=args.compile,
-        log=None if args.json else print,
+        log=_progress_line if args.json else print,  # with --json, progress goes to stderr
     )
     if args.json:
         _print_json(results)
@@ -531,6 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="environments stepped together (default: 100)",
     )
     p.add_argument("--device", default="cpu", help="cpu or cuda")
+    _add_threads_option(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_eval)
@@ -648,9 +687,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--compile",
         action=argparse.BooleanOptionalAction,
-        default=True,
-        help="fuse the step with torch.compile (default: on)",
+        default=False,
+        help="fuse the step with torch.compile (compiles some 40 s per size first; "
+        "default: off, the step as pes.make_env gives it)",
     )
+    _add_threads_option(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_scenario_options(p)
     p.set_defaults(func=cmd_bench)

@@ -347,3 +347,54 @@ class PESTorchRLEnv(EnvBase):
             f"{type(self).__name__}(num_envs={self.num_envs}, num_pursuers={self.num_pursuers}, "
             f"device={self.device})"
         )
+
+
+class TorchRLPolicy:
+    """A TorchRL policy of the ``"pursuers"`` group as a :class:`pes.policies.Policy`, so that
+    :func:`pes.evaluate.evaluate` (and ``pes eval``) measure it with PES's own protocol.
+
+    ``module`` is a ``TensorDictModule`` (or sequence) that reads ``("pursuers",
+    "observation")`` (E, N, 9N) -- as :class:`PESTorchRLEnv` gives it -- and writes
+    ``("pursuers", "action")`` (E, N, 2). It runs in TorchRL's deterministic exploration mode
+    (the mean or mode of a stochastic policy, no exploration noise); actions are clipped to
+    [-1, 1]. Recurrent policies, whose hidden state the tensordict would carry between steps,
+    are not supported: a module that reads keys other than the observation and the alive mask
+    is a one-line error.
+    """
+
+    row_wise = True  # see pes.policies.Policy
+
+    READS = {(GROUP, "observation"), (GROUP, "mask"), (GROUP, "obs_mask"), ("state",)}
+    """The keys the adapter fills: the observation, the alive and row masks, the global state."""
+
+    def __init__(self, module: Any) -> None:
+        keys = [k if isinstance(k, tuple) else (k,) for k in module.in_keys]
+        extra = [k for k in keys if k not in self.READS]
+        if extra:
+            raise ConfigError(
+                f"this TorchRL policy reads {extra}: only stateless policies of "
+                f"({GROUP!r}, 'observation') can be evaluated"
+            )
+        self.module = module
+
+    def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
+        from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+        alive = info["obs_mask"][:, :, 0]
+        group = TensorDict(
+            {
+                "observation": flatten_observation(obs, info["obs_mask"]),
+                "obs_mask": info["obs_mask"],
+                "mask": alive,
+            },
+            batch_size=alive.shape,
+        )
+        td = TensorDict(
+            {GROUP: group, "state": info["state"].flatten(1)}, batch_size=alive.shape[:1]
+        )
+        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+            out = self.module(td)
+        return out.get((GROUP, "action")).clamp(-1.0, 1.0)
+
+    def reset(self, mask: Tensor | None = None) -> None:
+        """Stateless between steps."""

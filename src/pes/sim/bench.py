@@ -127,6 +127,8 @@ def run_benchmark(config: EnvConfig, sizes: list[int], device: str = "cpu", step
     """:func:`measure` at every batch size in ``sizes``; a JSON-friendly dict."""
     results = []
     for size in sizes:
+        if log:
+            log(f"{size:>7} envs: warming up" + (" (compiling the step)" if compile else ""))
         row = measure(config, size, device=device, steps=steps, compile=compile)
         results.append(row)
         if log:
