@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import pes
 from pes.cli import main
 from pes.experiments.reproduce import reproduce
 from pes.experiments.trials import BUDGETS, make_trials, train_config
@@ -63,6 +64,13 @@ def test_all_targets_sequential(sweep):
     assert meta["machine"]["cpu_count"] >= 1 and set(meta["finished"]) == {
         s["id"] for s in make_trials(METHODS, 1, "tiny", tpnet=True)
     }
+    # Provenance: the protocol, the source commit, every training's resolved configuration.
+    assert meta["protocol"] == "pes" and "`pes` protocol" in table4
+    assert "commit" in meta and set(meta["trial_commits"]) == set(meta["finished"])
+    assert meta["trial_configs"]["cbc-tp-s0"]["algo"] == "cbc-tp"
+    assert meta["trial_configs"]["cbc-tp-s0"]["protocol"]["name"].startswith("pes")
+    assert meta["trial_configs"]["pid-pf-s0"] is None
+    assert "failed: step limit (PES)" in table4 and "crashes per episode (PES)" in table4
 
 
 @pytest.mark.slow
@@ -120,6 +128,18 @@ def test_budget_training_configs():
         assert cfg.seed == 2 and cfg.preset == "quick" and cfg.eval_episodes == 0
     cfg = train_config({"algo": "cbc-tp", "seed": 0}, BUDGETS["paper"])
     assert cfg.episodes == build_train_config("cbc-tp", "paper").episodes == 4000
+
+
+def test_protocol_of_the_learners():
+    """Every learner of a reproduction trains under one protocol: pes unless asked (and paper
+    under the paper budget); the scripted PID(PF) has none."""
+    for protocol in ("pes", "paper"):
+        specs = make_trials(["pid-pf", "maddpg", "cbc-tp"], 1, "quick", False, protocol)
+        assert "protocol" not in specs[0]
+        for spec in specs[1:]:
+            assert train_config(spec, BUDGETS["quick"]).protocol.name == protocol
+    with pytest.raises(pes.errors.ConfigError, match="protocol must be one of"):
+        reproduce("table4", budget="tiny", protocol="mine", use_ray=False)
 
 
 def test_user_mistakes(tmp_path, capsys):

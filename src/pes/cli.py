@@ -463,6 +463,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
         parallel=args.parallel,
         report_only=args.report_only,
+        protocol=args.protocol,
     )
     if args.json:
         _print_json(summary)
@@ -743,6 +744,13 @@ def build_parser() -> argparse.ArgumentParser:
         "settings), tiny (a one-minute check of the pipeline) (default: quick)",
     )
     p.add_argument("--seeds", type=_positive, default=3, help="seeds per method (default: 3)")
+    p.add_argument(
+        "--protocol",
+        choices=["pes", "paper"],
+        default=None,
+        help="training protocol of every learner (default: paper under --budget paper, pes "
+        "otherwise; see docs/training.md)",
+    )
     p.add_argument(
         "--methods",
         nargs="+",

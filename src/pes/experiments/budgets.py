@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -74,6 +75,25 @@ evaluate on 1000 episodes. ``tiny`` runs the whole pipeline in a minute (tests).
 
 DAMAGED = (1, 2)
 """Table VI: pursuers damaged at the start of the CBC-TP Net evaluations."""
+
+
+def source_commit() -> str | None:
+    """The git commit of the PES source that runs (``-dirty`` appended when tracked files
+    differ from it), or None outside a git checkout."""
+    git = ["git", "-C", str(Path(__file__).resolve().parents[3])]
+    try:
+        head = subprocess.run(
+            [*git, "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            [*git, "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("-dirty" if dirty else "")
 
 
 def write_json(path: Path, obj: Any) -> None:

@@ -15,9 +15,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from pes.algos.policy import load_pursuer_policy
-from pes.experiments.budgets import BUDGETS, DAMAGED, EVAL_SEED, eval_config, write_json
+from pes.experiments.budgets import (
+    BUDGETS,
+    DAMAGED,
+    EVAL_SEED,
+    eval_config,
+    source_commit,
+    write_json,
+)
 from pes.experiments.paper import LABELS, TABLE4, TABLE5, TABLE6
 from pes.record import plot_trajectories, record_episode
 from pes.sim.bench import machine_info
@@ -63,7 +71,8 @@ def _header(title: str, meta: dict) -> list[str]:
     return [
         f"# {title}",
         "",
-        f"Budget `{meta['budget']}`, {meta['seeds']} seed(s); each evaluation "
+        f"Budget `{meta['budget']}`, every learner trained under the `{meta['protocol']}` "
+        f"protocol, {meta['seeds']} seed(s); each evaluation "
         f"{meta['eval_episodes']} episodes with disturbance, crashes disable, against the "
         f"{meta['evader']}. Mean ± std over seeds. Made by `{meta['command']}` "
         f"({meta['hardware']}).",
@@ -91,6 +100,14 @@ def table4(specs: list[dict], done: dict, meta: dict) -> str | None:
         paper = [_paper(TABLE4[m][key], scale, digits, unit) for m in methods]
         lines.append(f"| {label} (PES) | " + " | ".join(ours) + " |")
         lines.append(f"| {label} (paper) | " + " | ".join(paper) + " |")
+    failures = (
+        ("failed: swarm lost to crashes (PES)", "lost_rate", 100.0, 1, " %"),
+        ("failed: step limit (PES)", "timeout_rate", 100.0, 1, " %"),
+        ("crashes per episode (PES)", "mean_crashes", 1.0, 2, ""),
+    )
+    for label, key, scale, digits, unit in failures:
+        ours = [_fmt([r[key] for r in rows[m] if key in r], scale, digits, unit) for m in methods]
+        lines.append(f"| {label} | " + " | ".join(ours) + " |")
     lines += [
         "",
         "Seeds per method: " + ", ".join(f"{LABELS[m]} {len(rows[m])}" for m in methods) + ".",
@@ -307,6 +324,12 @@ def _trajectory_figures(out, specs, done, meta, folder, plt) -> list[tuple[str, 
     return made
 
 
+def _resolved_config(folder: Path) -> dict | None:
+    """The full configuration a trial's training ran with (its ``run/config.yaml``)."""
+    path = folder / "run" / "config.yaml"
+    return yaml.safe_load(path.read_text()) if path.is_file() else None
+
+
 def write_report(
     out: Path,
     specs: list[dict],
@@ -315,6 +338,7 @@ def write_report(
     seeds: int,
     command: str,
     seconds: float,
+    protocol: str = "pes",
 ) -> list[str]:
     """Write every table and figure the finished trials allow; returns the files written."""
     done = _load(out, specs)
@@ -322,6 +346,7 @@ def write_report(
     cfg = eval_config(BUDGETS[budget])
     meta = {
         "budget": budget,
+        "protocol": protocol,
         "seeds": seeds,
         "eval_episodes": BUDGETS[budget].eval_episodes,
         "evader": (
@@ -372,6 +397,9 @@ def write_report(
                 k: v["train"]["wall_s"] for k, v in evals.items() if v.get("train")
             },
             "trial_seconds": {k: done[k].get("seconds_this_run") for k in evals},
+            "commit": source_commit(),
+            "trial_commits": {k: done[k].get("commit") for k in evals},
+            "trial_configs": {k: _resolved_config(out / "trials" / k) for k in evals},
             "machine": machine,
         },
     )

@@ -23,6 +23,7 @@ from pes.experiments.paper import METHODS
 from pes.experiments.report import write_report
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
 from pes.experiments.trials import BUDGETS, make_trials, run_trial
+from pes.learn.protocol import PROTOCOLS
 
 TARGETS = ("table4", "table5", "table6", "figures", "all")
 
@@ -32,8 +33,10 @@ def available_methods() -> list[str]:
     return [m for m in METHODS if m == "pid-pf" or m in ALGOS]
 
 
-def trials_for(target: str, methods: list[str], seeds: int, budget: str) -> list[dict]:
-    """The trial specs a target needs."""
+def trials_for(
+    target: str, methods: list[str], seeds: int, budget: str, protocol: str = "pes"
+) -> list[dict]:
+    """The trial specs a target needs, the learners trained under ``protocol``."""
     if target not in TARGETS:
         raise ConfigError(f"target must be one of {', '.join(TARGETS)}, got '{target}'")
     if target == "table6":
@@ -42,7 +45,7 @@ def trials_for(target: str, methods: list[str], seeds: int, budget: str) -> list
             raise ConfigError("table6 needs the cbc-tp method")
     elif target == "table5":
         methods = []
-    return make_trials(methods, seeds, budget, tpnet=target in ("table5", "all"))
+    return make_trials(methods, seeds, budget, target in ("table5", "all"), protocol)
 
 
 def reproduce(
@@ -57,9 +60,12 @@ def reproduce(
     command: str = "",
     parallel: int = 0,
     report_only: bool = False,
+    protocol: str | None = None,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
+    ``protocol``: the training protocol of every learner (:mod:`pes.learn.protocol`; default
+    ``paper`` under the paper budget, ``pes`` otherwise).
     ``use_ray``: None uses Ray when it is installed; False runs the trials in this process.
     ``parallel``: at most this many trials at once under Ray (0: one per CPU).
     ``report_only``: run nothing; write the report of the trials finished so far.
@@ -68,9 +74,12 @@ def reproduce(
         raise ConfigError(f"budget must be one of {', '.join(BUDGETS)}, got '{budget}'")
     if seeds < 1:
         raise ConfigError(f"seeds must be at least 1, got {seeds}")
+    protocol = protocol or ("paper" if budget == "paper" else "pes")
+    if protocol not in PROTOCOLS:
+        raise ConfigError(f"protocol must be one of {', '.join(PROTOCOLS)}, got '{protocol}'")
     use_ray = choose_runner(use_ray, ray_address)
     methods = list(methods) if methods else available_methods()
-    specs = trials_for(target, methods, seeds, budget)
+    specs = trials_for(target, methods, seeds, budget, protocol)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     todo = [s for s in specs if not (out / "trials" / s["id"] / "done.json").is_file()]
@@ -86,10 +95,11 @@ def reproduce(
             run_sequential(todo, out, view, run_trial)
     finally:
         view.close()
-    report = write_report(out, specs, target, budget, seeds, command, time.time() - start)
+    report = write_report(out, specs, target, budget, seeds, command, time.time() - start, protocol)
     return {
         "target": target,
         "budget": budget,
+        "protocol": protocol,
         "seeds": seeds,
         "out": str(out),
         "runner": "ray" if use_ray else "sequential",

@@ -35,6 +35,7 @@ from pes.experiments.budgets import (
     EVAL_SEED,
     Budget,
     eval_config,
+    source_commit,
     write_json,
 )
 from pes.experiments.tpnet import run_tpnet
@@ -47,8 +48,11 @@ def trial_id(kind: str, algo: str, seed: int) -> str:
     return f"{algo}-s{seed}" if kind != "tpnet" else f"tpnet-s{seed}"
 
 
-def make_trials(methods: list[str], seeds: int, budget: str, tpnet: bool) -> list[dict]:
-    """The trial specs (JSON-friendly dicts) for ``methods`` x ``seeds`` (and Table V's)."""
+def make_trials(
+    methods: list[str], seeds: int, budget: str, tpnet: bool, protocol: str = "pes"
+) -> list[dict]:
+    """The trial specs (JSON-friendly dicts) for ``methods`` x ``seeds`` (and Table V's); the
+    learners train under ``protocol``."""
     for algo in methods:
         if algo != "pid-pf" and algo not in ALGOS:
             raise ConfigError(f"unknown method '{algo}' (available: pid-pf, {', '.join(ALGOS)})")
@@ -66,15 +70,11 @@ def make_trials(methods: list[str], seeds: int, budget: str, tpnet: bool) -> lis
             )
         for algo in methods:
             kind = "pid-pf" if algo == "pid-pf" else "train"
-            specs.append(
-                {
-                    "id": trial_id(kind, algo, s),
-                    "kind": kind,
-                    "algo": algo,
-                    "seed": s,
-                    "budget": budget,
-                }
-            )
+            spec = {"id": trial_id(kind, algo, s), "kind": kind, "algo": algo, "seed": s}
+            spec["budget"] = budget
+            if kind == "train":
+                spec["protocol"] = protocol
+            specs.append(spec)
     return specs
 
 
@@ -101,7 +101,12 @@ def run_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
         result = {"table5": run_tpnet(spec, budget, folder)}
     else:
         result = _run_policy_trial(spec, budget, folder, threads)
-    record = {"spec": spec, "seconds_this_run": round(time.time() - start, 1), **result}
+    record = {
+        "spec": spec,
+        "commit": source_commit(),
+        "seconds_this_run": round(time.time() - start, 1),
+        **result,
+    }
     write_json(done, record)
     return record
 
@@ -138,10 +143,11 @@ def train_config(spec: dict, budget: Budget, threads: int = 0):
     the budget's name, the budget's overrides and share of the preset's episodes, the seed."""
     values = {**budget.train, "seed": spec["seed"], "eval_episodes": 0, "threads": threads}
     values["env"] = dict(budget.train.get("env", {}))
-    cfg = build_train_config(spec["algo"], budget.preset, values)
+    protocol = spec.get("protocol")
+    cfg = build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
     if budget.episode_fraction != 1.0:
         values["episodes"] = max(1, round(cfg.episodes * budget.episode_fraction))
-        cfg = build_train_config(spec["algo"], budget.preset, values)
+        cfg = build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
     return cfg
 
 
