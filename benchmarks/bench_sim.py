@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -135,6 +136,7 @@ def main() -> int:
         "date": time.strftime("%Y-%m-%d"),
         "device": args.device,
         "machine": machine_info(args.device),
+        "load_average_before": round(os.getloadavg()[0], 2),
         "scenario": "default EnvConfig: 5 pursuers (random actions), flee evader, quadrotor "
         "dynamics with 10 sub-steps, 8 buildings",
         "sizes": [],

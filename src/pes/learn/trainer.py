@@ -358,7 +358,45 @@ def train(
         desc=f"train {cfg.algo} ({protocol.name})",
         disable=not progress,
         dynamic_ncols=True,
+        # tqdm's own estimate counts episodes only: "left" below also knows the time limit.
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} ep [{elapsed}{postfix}]",
     )
+    first_episode = prog.episodes
+    row: dict[str, float] | None = None  # the latest log row
+    shown = -math.inf  # when the bar's figures were last refreshed
+
+    def show(now: float) -> None:
+        """The bar's figures: success, steps and reward of the episodes finished since the
+        last log row (else that row's), and the time left by the episodes or the time limit."""
+        nonlocal shown
+        recent = window if window["success"] else None
+        if recent is None and row is None:
+            return
+
+        def mean(key: str) -> float:
+            return sum(recent[key]) / len(recent[key])
+
+        figures = {
+            "success": mean("success") if recent else row["success_rate"],
+            "steps": mean("steps") if recent else row["episode_steps"],
+            "reward": mean("reward") if recent else row["avg_reward"],
+        }
+        run_s = now - start
+        done_here = prog.episodes - first_episode
+        left = deadline - prog.wall_s
+        if done_here > 0:
+            left = min(left, (cfg.episodes - prog.episodes) * run_s / done_here)
+        shown_figures = {
+            "success": f"{figures['success']:.2f}",
+            "steps": f"{figures['steps']:.0f}",
+            "reward": f"{figures['reward']:.3f}",
+        }
+        if prog.evader_speed:
+            shown_figures["evader"] = f"{prog.evader_speed:g}m/s"
+        shown_figures["left"] = tqdm.format_interval(max(left, 0.0)) if math.isfinite(left) else "?"
+        bar.set_postfix(shown_figures)  # a dict keeps this order (keywords would be sorted)
+        shown = now
+
     stopped_by = "episodes"
     with StopSignals() as signals:
         try:
@@ -383,6 +421,8 @@ def train(
                     learner.episode_reset(done)
                     prog.episodes += len(idx)
                     bar.update(len(idx))
+                    if progress and time.perf_counter() - shown >= 1.0:
+                        show(time.perf_counter())
                 obs, info = obs2, info2
 
                 if learner.ready():
@@ -456,12 +496,6 @@ def train(
                         env, obs, info = start_env()
                         reward_sum.zero_()
                         prog.best_score = -math.inf
-                    bar.set_postfix(
-                        success=f"{row['success_rate']:.2f}",
-                        steps=f"{row['episode_steps']:.0f}",
-                        reward=f"{row['avg_reward']:.3f}",
-                        **({"evader": f"{prog.evader_speed:g}m/s"} if prog.evader_speed else {}),
-                    )
                     window = {k: [] for k in window}
                     demo_in_row = False
                     stats_sum, stats_count = {}, {}
