@@ -12,8 +12,10 @@ scalar to float32 first; ``g / t`` is ``(1 / t) * g``; ``rsqrt`` is ``1 / sqrt``
 paths give the same numbers bit for bit (tests/test_kernels.py). The transcendental functions
 (the attitude setpoint's ``atan``, the initial ``cos`` and ``sin``) stay in torch.
 
-Numba compiles the kernel on first use (about a second) and caches it beside this file.
-``PES_KERNELS=0`` in the environment, or a missing ``numba``, selects the torch loop.
+The kernel itself is in :mod:`pes.sim._numba_substeps`, imported on first use only (so that
+``import pes`` does not import Numba); Numba compiles it then (a few seconds) and caches the
+machine code beside that file, so later processes load it. ``PES_KERNELS=0`` in the
+environment, or a missing ``numba``, selects the torch loop.
 """
 
 from __future__ import annotations
@@ -48,75 +50,18 @@ def _load():
     global _kernel, _failed
     if _kernel is None and not _failed:
         try:
-            _kernel = _build()
+            from pes.sim._numba_substeps import substeps
+
+            # Compile (or load from the cache) now, for the argument types of every call, so
+            # that a Numba that cannot compile means the torch loop, not an error mid-step.
+            f32, grid, row = np.float32, np.zeros((1, 1), np.float32), np.ones(1, np.float32)
+            cube = np.zeros((13, 1, 1), np.float32)
+            trig = np.ones((6, 1, 1), np.float32)
+            substeps(cube, trig, grid, grid, grid, grid, cube[:3, 0], row, *[f32(0.1)] * 5, 1)
+            _kernel = substeps
         except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch loop
             _failed = True
     return _kernel
-
-
-def _build():
-    import numba
-
-    f32 = np.float32
-    one, half, zero = f32(1.0), f32(0.5), f32(0.0)
-    c24, c6, c120 = f32(1.0 / 24.0), f32(1.0 / 6.0), f32(1.0 / 120.0)
-    tiny, gravity = f32(1e-12), f32(9.81)
-
-    @numba.njit(cache=True, nogil=True)
-    def rotate(c, s, delta):
-        d2 = delta * delta
-        cd = one - d2 * (half - d2 * c24)
-        sd = delta * (one - d2 * (c6 - d2 * c120))
-        return c * cd - s * sd, s * cd + c * sd
-
-    @numba.njit(cache=True, nogil=True)
-    def substeps(state, trig, roll_ref, pitch_ref, fx, fy, gyro, max_speed, h, b, kp, ki, kd, n):
-        out = np.empty_like(state)
-        num_envs, num_vehicles = roll_ref.shape
-        for e in range(num_envs):
-            for a in range(num_vehicles):
-                x, y, vx, vy = state[0, e, a], state[1, e, a], state[2, e, a], state[3, e, a]
-                roll, pitch, yaw = state[4, e, a], state[5, e, a], state[6, e, a]
-                droll, dpitch, dyaw = state[7, e, a], state[8, e, a], state[9, e, a]
-                iroll, ipitch, iyaw = state[10, e, a], state[11, e, a], state[12, e, a]
-                cr, cp, cy = trig[0, e, a], trig[1, e, a], trig[2, e, a]
-                sr, sp, sy = trig[3, e, a], trig[4, e, a], trig[5, e, a]
-                rr, pr = roll_ref[e, a], pitch_ref[e, a]
-                ex, ey = fx[e, a], fy[e, a]
-                g_roll, g_pitch, g_yaw = gyro[0, a], gyro[1, a], gyro[2, a]
-                vmax = max_speed[a]
-                for _ in range(n):
-                    e_roll, e_pitch, e_yaw = rr - roll, pr - pitch, -yaw
-                    acc_roll = g_roll * dpitch * dyaw + kp * (b * rr - roll) + ki * iroll
-                    acc_roll = acc_roll - kd * droll
-                    acc_pitch = g_pitch * droll * dyaw + kp * (b * pr - pitch) + ki * ipitch
-                    acc_pitch = acc_pitch - kd * dpitch
-                    acc_yaw = g_yaw * dpitch * droll - kp * yaw + ki * iyaw - kd * dyaw
-                    iroll, ipitch, iyaw = iroll + e_roll * h, ipitch + e_pitch * h, iyaw + e_yaw * h
-                    droll = droll + acc_roll * h
-                    dpitch = dpitch + acc_pitch * h
-                    dyaw = dyaw + acc_yaw * h
-                    roll, pitch, yaw = roll + droll * h, pitch + dpitch * h, yaw + dyaw * h
-                    cr, sr = rotate(cr, sr, droll * h)
-                    cp, sp = rotate(cp, sp, dpitch * h)
-                    cy, sy = rotate(cy, sy, dyaw * h)
-                    thrust_per_mass = (one / (cr * cp)) * gravity
-                    ax = (sy * sr + cr * sp * cy) * thrust_per_mass + ex
-                    ay = (-cy * sr + cr * sp * sy) * thrust_per_mass + ey
-                    vx, vy = vx + ax * h, vy + ay * h
-                    scale = vmax * (one / np.sqrt(vx * vx + vy * vy + tiny))
-                    if scale > one:
-                        scale = one
-                    vx, vy = vx * scale, vy * scale
-                    x, y = x + vx * h, y + vy * h
-                out[0, e, a], out[1, e, a], out[2, e, a], out[3, e, a] = x, y, vx, vy
-                out[4, e, a], out[5, e, a], out[6, e, a] = roll, pitch, yaw
-                out[7, e, a], out[8, e, a], out[9, e, a] = droll, dpitch, dyaw
-                out[10, e, a], out[11, e, a], out[12, e, a] = iroll, ipitch, iyaw
-        return out
-
-    del zero
-    return substeps
 
 
 def quadrotor_substeps(
