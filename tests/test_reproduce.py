@@ -172,3 +172,8 @@ def test_tune_scores_every_trial_resumes_and_refuses_other_settings(tmp_path):
     assert again["results"] == summary["results"]
     with pytest.raises(ConfigError, match="other settings"):
         tune("ppo", out=tmp_path, progress=False, **dict(kwargs, minutes=0.05))
+    # --report-only: a longer search reports the scored trials and runs none.
+    partial = tune("ppo", out=tmp_path, progress=False, report_only=True, **dict(kwargs, trials=3))
+    assert partial["finished"] == 2 and partial["trials"] == 3
+    assert not (tmp_path / "trials" / "t02").exists()
+    assert "2 of 3 trials finished" in (tmp_path / "README.md").read_text()

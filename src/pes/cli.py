@@ -499,7 +499,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         parallel=args.parallel,
         progress=not args.json,
-        command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["tune"] else "",
+        # The command that runs the trials (a --report-only run names it, not itself).
+        command=shlex.join(["pes", *(a for a in sys.argv[1:] if a != "--report-only")])
+        if sys.argv[1:2] == ["tune"]
+        else "",
+        report_only=args.report_only,
     )
     if args.json:
         _print_json(summary)
@@ -817,6 +821,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N",
         help="with Ray, at most N trials at once (default 0: one per CPU)",
+    )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="run no trial: write OUT/tuning.json and OUT/README.md of the trials scored so far",
     )
     p.add_argument("--out", default=None, help="output folder (default: results/tuning/ALGO)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -165,17 +165,18 @@ def tune(
     progress: bool = True,
     command: str = "",
     preset: str = "quick",
+    report_only: bool = False,
 ) -> dict[str, Any]:
     """Run (or finish) the search of ``algo`` into ``out`` and write its report; returns a
     summary with every finished trial, best first. ``preset`` is the budget each trial trains
-    (``quick``; ``tiny`` for tests)."""
+    (``quick``; ``tiny`` for tests); ``report_only`` runs no trial and reports the scored ones."""
     if algo not in ALGOS:
         raise ConfigError(f"algo must be one of {', '.join(ALGOS)}, got '{algo}'")
     specs = make_tune_trials(algo, trials, minutes, eval_episodes, protocol, seed, preset)
     out = Path(out or f"results/tuning/{algo}")
     out.mkdir(parents=True, exist_ok=True)
     use_ray = choose_runner(use_ray, ray_address)
-    todo = [s for s in specs if finished(out, s) is None]
+    todo = [] if report_only else [s for s in specs if finished(out, s) is None]
     start = time.time()
     view = SweepProgress(len(specs), len(specs) - len(todo), progress and bool(todo), "tune")
     try:
