@@ -2,6 +2,7 @@
 
     python benchmarks/bench_eval.py                 # writes benchmarks/results/eval_cpu.json
     python benchmarks/bench_eval.py --episodes 200 --threads 1 --out /tmp/eval.json
+    python benchmarks/bench_eval.py --episodes 0 --out benchmarks/results/first_step_cpu.json
 
 What is measured, each as a fresh ``pes eval`` process, exactly as a user runs it:
 
@@ -72,7 +73,7 @@ def first_step(cache_dir: str) -> float:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--episodes", type=int, default=1000, help="0: the first step only")
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--out", default="benchmarks/results/eval_cpu.json")
     args = parser.parse_args()
@@ -93,7 +94,7 @@ def main() -> int:
         log("first step, empty kernel cache ...")
         report["first_step_s"] = {"empty_cache": first_step(cache)}
         report["first_step_s"]["cached"] = first_step(cache)
-    for beside in (False, True):
+    for beside in (False, True) if args.episodes > 0 else ():
         busy = None
         if beside:
             busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])

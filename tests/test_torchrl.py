@@ -221,7 +221,7 @@ def test_benchmarl_algorithms_run(tmp_path, algorithm):
     assert experiment.total_frames == 120
 
 
-@pytest.mark.parametrize("task_name", ["damaged", "point_mass", "easy"])
+@pytest.mark.parametrize("task_name", ["damaged", "point_mass", "easy", "train"])
 def test_benchmarl_tasks_run(tmp_path, task_name):
     experiment = tiny_experiment(tmp_path, task_name, "Mappo")
     config = experiment.task.config
@@ -231,6 +231,8 @@ def test_benchmarl_tasks_run(tmp_path, task_name):
         assert config["dynamics"] == "point_mass"
     if task_name == "easy":
         assert config["evader_max_speed"] < config["pursuer_max_speed"]
+    if task_name == "train":
+        assert config["evader_policy"] == "ddpg" and config["capture_reward"] == 25.0
     experiment.run()
     assert experiment.n_iters_performed == 2
 

@@ -12,6 +12,11 @@ task           scenario (:class:`pes.EnvConfig` overrides on top of the defaults
                loop (faster, for ablations)
 ``easy``       the four corner blocks removed as well as the central one (four buildings left)
                and the evader capped at 8 m/s (slower than the pursuers' 10)
+``train``      what PES's own learners train in under the ``pes`` protocol: the default DDPG
+               evader, the protocol's training reward and the disturbance, crashes that let a
+               pursuer fly on (:meth:`pes.learn.protocol.Protocol.env_overrides`); the
+               protocol's other aids (demonstrations, curricula, noise schedule) are PES's
+               trainer's and do not apply here
 ============== ===================================================================================
 
 A task's config is a flat mapping of :class:`pes.EnvConfig` keys (unknown keys fail loudly, as in
@@ -71,6 +76,7 @@ try:
 except ImportError as exc:  # pragma: no cover - depends on the optional extra
     raise ImportError("pes.benchmarl needs BenchMARL: pip install 'pes[benchmarl]'") from exc
 
+from pes.learn.protocol import PROTOCOLS
 from pes.sim.config import EnvConfig
 from pes.torchrl import GROUP, PESTorchRLEnv
 
@@ -85,6 +91,7 @@ TASK_CONFIGS: dict[str, dict[str, Any]] = {
         "removed_blocks": [[0, 0], [0, 2], [1, 1], [2, 0], [2, 2]],
         "evader_max_speed": 8.0,
     },
+    "train": {"evader_policy": "ddpg", **PROTOCOLS["pes"].env_overrides()},
 }
 """Each task's config: :class:`pes.EnvConfig` keys over the defaults (see the module docstring)."""
 
@@ -190,6 +197,7 @@ class PESTask(Task):
     DAMAGED = None
     POINT_MASS = None
     EASY = None
+    TRAIN = None
 
     @staticmethod
     def associated_class():
