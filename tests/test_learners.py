@@ -592,3 +592,18 @@ def test_an_interrupt_stops_the_run_with_its_files_written(sig, tmp_path):
         [*argv, "--set", "episodes=16", "--out", str(out), "--resume"], capture_output=True
     )
     assert done.returncode == 0
+
+
+def test_cpu_limit_stops_a_run_by_its_cpu_time_and_resumes_with_it(tmp_path):
+    """``cpu_limit`` counts the process's CPU time (what a run shares with nothing else), is
+    kept by the checkpoint and stops the resumed run at the same total."""
+    limit = 0.05  # minutes: 3 s of CPU time
+    values = {"episodes": 10**6, "cpu_limit": limit, "threads": 1, "eval_episodes": 0}
+    cfg = build_train_config("ppo", "tiny", values)
+    summary = train(cfg, tmp_path / "run", progress=False)
+    assert summary["stopped_by"] == "cpu_limit"
+    assert 60 * limit <= summary["cpu_s"] < 60 * limit + 30
+    longer = build_train_config("ppo", "tiny", dict(values, cpu_limit=2 * limit))
+    resumed = train(longer, tmp_path / "run", resume=True, progress=False)
+    assert resumed["stopped_by"] == "cpu_limit" and resumed["episodes"] > summary["episodes"]
+    assert 120 * limit <= resumed["cpu_s"] < 120 * limit + 30

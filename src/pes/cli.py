@@ -791,8 +791,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="the same hyper-parameter search for any learner",
         description="Random search over the learner's key settings (its TUNE_SPACE: learning "
         "rates, exploration or entropy, batch size, network width): each trial trains the "
-        "quick preset with its settings for --minutes minutes on one thread under --protocol "
-        "and is scored on --eval-episodes held-out episodes; trial t00 is the preset itself. "
+        "quick preset with its settings for --minutes minutes of CPU time on one thread (the "
+        "same work whatever else runs) under --protocol and is scored on --eval-episodes held-out episodes; trial t00 is the preset itself. "
         "Trials run under Ray when it is installed, else one after the other; re-running "
         "resumes. Writes OUT/tuning.json and OUT/README.md (see docs/reproduce.md).",
     )
@@ -803,8 +803,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--minutes",
         type=_positive_float,
         default=30.0,
-        help="training minutes per trial (default: 30; under the pes protocol a trial must "
-        "outlast its 100,000 demonstration transitions)",
+        help="training minutes of CPU time per trial (default: 30; under the pes protocol a "
+        "trial must outlast its 100,000 demonstration transitions)",
     )
     p.add_argument(
         "--eval-episodes",

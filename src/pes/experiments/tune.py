@@ -5,8 +5,9 @@
 A search samples ``trials`` settings of the learner's :attr:`~pes.learn.learner.Learner.
 TUNE_SPACE` (two to four keys: learning rates, exploration or entropy, batch size, network
 width) by random search from a fixed seed; trial 0 is the quick preset itself. Each trial trains
-the quick preset with its settings under the chosen protocol for ``minutes`` minutes of training
-on one torch thread, then is scored on ``eval_episodes`` held-out evaluation episodes (the
+the quick preset with its settings under the chosen protocol for ``minutes`` minutes of CPU time
+on one torch thread (the run key ``cpu_limit``: the same work whatever else shares the
+machine), then is scored on ``eval_episodes`` held-out evaluation episodes (the
 paper's protocol: disturbance on, crashes disable, the default evader; seeds never used in
 training or in ``pes reproduce``): success rate first, fewer steps second. Every learner gets
 the same budget: the same trial count, minutes and evaluation.
@@ -80,6 +81,7 @@ def make_tune_trials(
                 "preset": preset,
                 "values": values,
                 "minutes": minutes,
+                "clock": "cpu",
                 "eval_episodes": eval_episodes,
                 "protocol": protocol,
                 "seed": seed,
@@ -116,7 +118,8 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     values = {
         **spec["values"],
         "seed": spec["seed"],
-        "time_limit": spec["minutes"],
+        "cpu_limit": spec["minutes"],  # CPU minutes: the same work beside other jobs
+        "time_limit": 0.0,
         "episodes": 10**7,  # the minutes bind
         "eval_episodes": 0,
         "threads": threads or 1,
@@ -138,7 +141,9 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     record = {
         "spec": spec,
         "learner": cfg.learner.__dict__,
-        "train": {k: train_summary[k] for k in ("episodes", "env_steps", "updates", "wall_s")},
+        "train": {
+            k: train_summary[k] for k in ("episodes", "env_steps", "updates", "wall_s", "cpu_s")
+        },
         "eval": result,
         "score": score(result),
     }
@@ -204,6 +209,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "trials": len(specs),
         "finished": len(results),
         "minutes_per_trial": first["minutes"],
+        "clock": "cpu",
         "eval_episodes": first["eval_episodes"],
         "search_space": {k: list(v) for k, v in learner_class(first["algo"]).TUNE_SPACE.items()},
         "command": command,
@@ -218,6 +224,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
                 "mean_steps": r["eval"]["mean_steps"],
                 "mean_crashes": r["eval"]["mean_crashes"],
                 "train_episodes": r["train"]["episodes"],
+                "train_env_steps": r["train"]["env_steps"],
                 "updates": r["train"]["updates"],
             }
             for r in results
@@ -228,20 +235,22 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         f"# Tuning `{first['algo']}` ({first['protocol']} protocol)",
         "",
         f"{len(results)} of {len(specs)} trials finished; each trains the quick preset with its "
-        f"settings for {first['minutes']:g} minutes on one torch thread and is scored on "
+        f"settings for {first['minutes']:g} minutes of CPU time on one torch thread and is "
+        "scored on "
         f"{first['eval_episodes']} held-out episodes (disturbance on, crashes disable, the "
         "default evader). Trial t00 is the quick preset itself.",
         "",
         f"Command: `{command}`" if command else "",
         "",
-        "| trial | settings | success | steps | crashes | training episodes |",
-        "| --- | --- | --- | --- | --- | --- |",
+        "| trial | settings | success | steps | crashes | training episodes | env steps |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in summary["results"]:
         settings = ", ".join(f"{k}={v}" for k, v in r["values"].items()) or "(quick preset)"
         lines.append(
             f"| {r['id']} | {settings} | {100 * r['success_rate']:.1f} % | "
-            f"{r['mean_steps']:.0f} | {r['mean_crashes']:.2f} | {r['train_episodes']} |"
+            f"{r['mean_steps']:.0f} | {r['mean_crashes']:.2f} | {r['train_episodes']} | "
+            f"{r['train_env_steps']:,} |"
         )
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}

@@ -120,6 +120,10 @@ class TrainConfig:
     """Training episodes (finished episodes, summed over all environments)."""
     time_limit: float = 0.0
     """Stop after this many minutes of training (0 = no limit); a checkpoint is written."""
+    cpu_limit: float = 0.0
+    """Stop after this many minutes of this process's CPU time (all its threads; 0 = no
+    limit): unlike ``time_limit``, the same work whatever else shares the machine's cores
+    (``pes tune``'s trial budget)."""
     num_envs: int = 1
     """Environments collected from at once."""
     init_from: str = ""
@@ -144,7 +148,7 @@ class TrainConfig:
         for name in ("episodes", "num_envs", "log_every"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
-        for name in ("time_limit", "checkpoint_every", "eval_episodes", "threads"):
+        for name in ("time_limit", "cpu_limit", "checkpoint_every", "eval_episodes", "threads"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
         if self.device not in ("cpu", "cuda"):

@@ -100,6 +100,7 @@ demonstrations (the protocol's ``bc_weight``)."""
 RESUMABLE_CHANGES = {
     "episodes",
     "time_limit",
+    "cpu_limit",
     "checkpoint_every",
     "eval_episodes",
     "device",
@@ -116,6 +117,7 @@ class Progress:
     env_steps: int = 0
     updates: int = 0
     wall_s: float = 0.0
+    cpu_s: float = 0.0  # this run's process CPU time (all threads), s
     update_credit: float = 0.0
     best_score: float = -math.inf
     log_rows: int = 0  # rows of progress.csv written
@@ -300,6 +302,7 @@ def train(
             "env_steps": prog.env_steps,
             "updates": prog.updates,
             "wall_s": round(prog.wall_s, 1),
+            "cpu_s": round(prog.cpu_s, 1),
             "seed": cfg.seed,
             "torch": str(torch.__version__),
         }
@@ -347,10 +350,11 @@ def train(
         torch.set_rng_state(ckpt["rng"]["torch"])
         gen.set_state(ckpt["rng"]["sampler"])
     start = time.perf_counter()
-    wall0 = prog.wall_s
+    wall0, cpu0, cpu_start = prog.wall_s, prog.cpu_s, time.process_time()
     last_ckpt = start
     row_start = (start, prog.env_steps, prog.updates)
     deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
+    cpu_deadline = cfg.cpu_limit * 60.0 if cfg.cpu_limit > 0 else math.inf
     bar = tqdm(
         total=cfg.episodes,
         initial=min(prog.episodes, cfg.episodes),
@@ -383,7 +387,7 @@ def train(
         }
         run_s = now - start
         done_here = prog.episodes - first_episode
-        left = deadline - prog.wall_s
+        left = min(deadline - prog.wall_s, cpu_deadline - prog.cpu_s)
         if done_here > 0:
             left = min(left, (cfg.episodes - prog.episodes) * run_s / done_here)
         shown_figures = {
@@ -436,6 +440,7 @@ def train(
 
                 now = time.perf_counter()
                 prog.wall_s = wall0 + now - start
+                prog.cpu_s = cpu0 + time.process_time() - cpu_start
                 if prog.episodes >= next_row and window["success"]:
                     dt = max(now - row_start[0], 1e-9)
                     row = {
@@ -506,6 +511,9 @@ def train(
                     last_ckpt = time.perf_counter()
                 if prog.wall_s >= deadline:
                     stopped_by = "time_limit"
+                    break
+                if prog.cpu_s >= cpu_deadline:
+                    stopped_by = "cpu_limit"
                     break
                 if signals.requested:
                     stopped_by = "interrupted"
