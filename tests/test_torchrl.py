@@ -322,3 +322,23 @@ def test_torchrl_policy_refuses_a_recurrent_module():
     )  # fmt: skip
     with pytest.raises(pes.errors.ConfigError, match="stateless"):
         TorchRLPolicy(module)
+
+
+def test_benchmarl_reference_run_stops_at_its_cpu_budget_and_is_evaluated(tmp_path):
+    """A reference run on pes/train: BenchMARL's configs, stopped by CPU time with a
+    checkpoint, that checkpoint evaluated with PES's protocol; a second call reads the result."""
+    pytest.importorskip("benchmarl")
+    from pes.benchmarl.reference import run_reference
+
+    small = {
+        "on_policy_collected_frames_per_batch": 60,
+        "on_policy_n_envs_per_worker": 2,
+        "on_policy_n_minibatch_iters": 1,
+        "on_policy_minibatch_size": 20,
+    }
+    kwargs = dict(cpu_minutes=0.02, eval_episodes=2, checkpoint_every=1)
+    result = run_reference("mappo", 0, tmp_path, experiment_overrides=small, **kwargs)
+    assert result["cpu_s"] >= 0.02 * 60 and result["frames"] >= 60
+    assert result["eval"]["episodes"] == 2 and result["task"] == "pes/train"
+    assert (tmp_path / result["checkpoint"]).is_file()
+    assert run_reference("mappo", 0, tmp_path, **kwargs) == result

@@ -792,7 +792,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Random search over the learner's key settings (its TUNE_SPACE: learning "
         "rates, exploration or entropy, batch size, network width): each trial trains the "
         "quick preset with its settings for --minutes minutes of CPU time on one thread (the "
-        "same work whatever else runs) under --protocol and is scored on --eval-episodes held-out episodes; trial t00 is the preset itself. "
+        "same work whatever else runs) under --protocol and is scored on --eval-episodes "
+        "held-out episodes; trial t00 is the preset itself. "
         "Trials run under Ray when it is installed, else one after the other; re-running "
         "resumes. Writes OUT/tuning.json and OUT/README.md (see docs/reproduce.md).",
     )

@@ -1,0 +1,190 @@
+"""BenchMARL's algorithms as outside reference runs for Table IV, on PES's training budget.
+
+    python -m pes.benchmarl.reference --algorithm mappo --seed 0 --out results/benchmarl/mappo-s0
+
+One run: BenchMARL's own algorithm, model (MLP) and experiment configs, unchanged except that
+the run is stopped by a budget of CPU time instead of frames, trained on the task ``pes/train``
+(the scenario PES's own learners train in under the ``pes`` protocol), on one torch thread; then
+its last checkpoint is evaluated with PES's own protocol (``pes eval``'s: 1000 episodes,
+disturbance on, crashes disable, the default evader; the seeds of ``pes reproduce``).
+
+The budget is CPU time of this process (``--cpu-minutes``, default 60: a quick preset's hour on
+one core), the same work whatever else runs on the machine. Every iteration adds its CPU time
+to ``OUT/budget.json``, and a checkpoint is written every ``--checkpoint-every`` iterations, so
+running the same command again resumes from the last checkpoint with the CPU time spent so far
+(the iterations after that checkpoint are done again, and their time counted again). Writes
+``OUT/<experiment>/`` (BenchMARL's folder: CSV logs, checkpoints, ``config.pkl``),
+``OUT/budget.json`` and ``OUT/result.json`` (the command, the counters, the evaluation).
+
+What BenchMARL gets and PES's learners get alike: the scenario, the training reward, the
+disturbance, the CPU budget and the evaluation. What it does not get: the ``pes`` protocol's
+other aids (PID(PF)'s demonstrations, the crash curriculum, the noise schedule, n-step targets,
+greedy environments), which are PES's trainer's; a report quoting these runs says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+from benchmarl import algorithms
+from benchmarl.experiment import Experiment, ExperimentConfig
+from benchmarl.experiment.callback import Callback
+from benchmarl.models import MlpConfig
+
+from pes.benchmarl import PESTask
+from pes.benchmarl.policy import load_benchmarl_policy
+from pes.evaluate import evaluate
+from pes.experiments.budgets import BUDGETS, EVAL_ENVS, EVAL_SEED, eval_config, write_json
+
+ALGORITHMS = {"mappo": "Mappo", "ippo": "Ippo", "maddpg": "Maddpg", "masac": "Masac"}
+"""``--algorithm`` name -> BenchMARL's config class prefix."""
+
+
+class _BudgetSpentError(Exception):
+    """Raised by :class:`CpuBudget` once the budget is spent (the checkpoint is written)."""
+
+
+class CpuBudget(Callback):
+    """Stops a BenchMARL experiment after ``minutes`` of this process's CPU time (``spent``
+    seconds already used by earlier runs of it), with a checkpoint; records the time spent in
+    ``record`` after every iteration."""
+
+    def __init__(self, minutes: float, spent: float, record: Path) -> None:
+        super().__init__()
+        self.budget_s, self.spent_before, self.record = 60.0 * minutes, spent, record
+        self.start = time.process_time()
+
+    def spent(self) -> float:
+        return self.spent_before + time.process_time() - self.start
+
+    def on_train_end(self, training_td, group: str) -> None:
+        exp = self.experiment
+        write_json(self.record, {"cpu_s": round(self.spent(), 1), "frames": exp.total_frames})
+        if self.spent() >= self.budget_s:
+            exp._save_experiment()  # BenchMARL's own checkpoint writer
+            raise _BudgetSpentError
+
+
+def _latest_checkpoint(out: Path) -> Path | None:
+    found = sorted(
+        out.glob("*/checkpoints/checkpoint_*.pt"), key=lambda p: int(p.stem.split("_")[-1])
+    )
+    return found[-1] if found else None
+
+
+def run_reference(
+    algorithm: str,
+    seed: int,
+    out: str | Path,
+    cpu_minutes: float = 60.0,
+    eval_episodes: int = 1000,
+    checkpoint_every: int = 10,
+    experiment_overrides: dict[str, Any] | None = None,
+    command: str = "",
+) -> dict[str, Any]:
+    """Train (or finish) one reference run into ``out`` and evaluate it; returns ``result.json``
+    (see the module docstring). ``experiment_overrides``: ``ExperimentConfig`` fields to change
+    (tests shrink the batches)."""
+    out = Path(out)
+    done = out / "result.json"
+    if done.is_file():
+        return json.loads(done.read_text())
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got '{algorithm}'")
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(1)
+    record = out / "budget.json"
+    spent = json.loads(record.read_text())["cpu_s"] if record.is_file() else 0.0
+
+    config = ExperimentConfig.get_from_yaml()
+    config.save_folder = str(out)
+    config.loggers = ["csv"]
+    config.create_json = True
+    config.max_n_frames = 10**12  # the CPU budget binds
+    config.max_n_iters = None
+    config.evaluation = False  # PES evaluates the last checkpoint with its own protocol
+    config.checkpoint_at_end = True
+    config.sampling_device = config.train_device = "cpu"
+    for key, value in (experiment_overrides or {}).items():
+        setattr(config, key, value)
+    on_policy = algorithm in ("mappo", "ippo")
+    config.checkpoint_interval = checkpoint_every * config.collected_frames_per_batch(on_policy)
+    config.keep_checkpoints_num = 2
+    resume = _latest_checkpoint(out)
+    config.restore_file = str(resume) if resume is not None else None
+    budget = CpuBudget(cpu_minutes, spent, record)
+    if spent < 60.0 * cpu_minutes:
+        experiment = Experiment(
+            task=PESTask.TRAIN.get_task(),
+            algorithm_config=getattr(algorithms, f"{ALGORITHMS[algorithm]}Config").get_from_yaml(),
+            model_config=MlpConfig.get_from_yaml(),
+            critic_model_config=MlpConfig.get_from_yaml(),
+            seed=seed,
+            config=config,
+            callbacks=[budget],
+        )
+        try:
+            experiment.run()
+        except _BudgetSpentError:
+            experiment.close()
+    checkpoint = _latest_checkpoint(out)
+    env_cfg = eval_config(BUDGETS["quick"])
+    policy = load_benchmarl_policy(checkpoint, env_cfg)
+    result = evaluate(
+        policy,
+        env_cfg,
+        eval_episodes,
+        num_envs=min(EVAL_ENVS, eval_episodes),
+        seed=EVAL_SEED + 10_000 * seed,
+    )
+    state = json.loads(record.read_text()) if record.is_file() else {}
+    summary = {
+        "method": f"{algorithm.upper()} (BenchMARL)",
+        "algorithm": algorithm,
+        "seed": seed,
+        "task": "pes/train",
+        "cpu_minutes": cpu_minutes,
+        "command": command,
+        "checkpoint": str(checkpoint.relative_to(out)),
+        "frames": int(checkpoint.stem.split("_")[-1]),
+        "cpu_s": state.get("cpu_s"),
+        "eval": result.summary(),
+    }
+    write_json(done, summary)
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m pes.benchmarl.reference", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("--algorithm", required=True, choices=list(ALGORITHMS))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--cpu-minutes", type=float, default=60.0)
+    parser.add_argument("--eval-episodes", type=int, default=1000)
+    parser.add_argument("--checkpoint-every", type=int, default=10, help="iterations")
+    parser.add_argument("--out", required=True)
+    args = parser.parse_args(argv)
+    command = shlex.join(["python", "-m", "pes.benchmarl.reference", *(argv or sys.argv[1:])])
+    summary = run_reference(
+        args.algorithm,
+        args.seed,
+        args.out,
+        cpu_minutes=args.cpu_minutes,
+        eval_episodes=args.eval_episodes,
+        checkpoint_every=args.checkpoint_every,
+        command=command,
+    )
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
