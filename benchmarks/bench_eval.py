@@ -92,7 +92,8 @@ def main() -> int:
     }
     with tempfile.TemporaryDirectory() as cache:
         log("first step, empty kernel cache ...")
-        report["first_step_s"] = {"empty_cache": first_step(cache)}
+        report["first_step_s"] = {"load_before": round(os.getloadavg()[0], 2)}
+        report["first_step_s"]["empty_cache"] = first_step(cache)
         report["first_step_s"]["cached"] = first_step(cache)
     for beside in (False, True) if args.episodes > 0 else ():
         busy = None
