@@ -342,3 +342,8 @@ def test_benchmarl_reference_run_stops_at_its_cpu_budget_and_is_evaluated(tmp_pa
     assert result["eval"]["episodes"] == 2 and result["task"] == "pes/train"
     assert (tmp_path / result["checkpoint"]).is_file()
     assert run_reference("mappo", 0, tmp_path, **kwargs) == result
+    # A larger budget resumes from the checkpoint with the CPU time spent up to it.
+    (tmp_path / "result.json").unlink()
+    longer = dict(kwargs, cpu_minutes=(result["cpu_s"] + 1.0) / 60)
+    resumed = run_reference("mappo", 0, tmp_path, experiment_overrides=small, **longer)
+    assert resumed["frames"] > result["frames"] and resumed["cpu_s"] >= result["cpu_s"] + 1.0

@@ -11,8 +11,8 @@ disturbance on, crashes disable, the default evader; the seeds of ``pes reproduc
 The budget is CPU time of this process (``--cpu-minutes``, default 60: a quick preset's hour on
 one core), the same work whatever else runs on the machine. Every iteration adds its CPU time
 to ``OUT/budget.json``, and a checkpoint is written every ``--checkpoint-every`` iterations, so
-running the same command again resumes from the last checkpoint with the CPU time spent so far
-(the iterations after that checkpoint are done again, and their time counted again). Writes
+running the same command again resumes from the last checkpoint with the CPU time spent up to
+it (the iterations after that checkpoint are done again). Writes
 ``OUT/<experiment>/`` (BenchMARL's folder: CSV logs, checkpoints, ``config.pkl``),
 ``OUT/budget.json`` and ``OUT/result.json`` (the command, the counters, the evaluation).
 
@@ -59,6 +59,7 @@ class CpuBudget(Callback):
     def __init__(self, minutes: float, spent: float, record: Path) -> None:
         super().__init__()
         self.budget_s, self.spent_before, self.record = 60.0 * minutes, spent, record
+        self.at_checkpoint = spent  # CPU time spent up to the latest checkpoint
         self.start = time.process_time()
 
     def spent(self) -> float:
@@ -66,8 +67,19 @@ class CpuBudget(Callback):
 
     def on_train_end(self, training_td, group: str) -> None:
         exp = self.experiment
-        write_json(self.record, {"cpu_s": round(self.spent(), 1), "frames": exp.total_frames})
-        if self.spent() >= self.budget_s:
+        spent = round(self.spent(), 1)
+        over = spent >= self.budget_s
+        # BenchMARL checkpoints at the end of this iteration when the frames say so.
+        checkpoints = exp.config.checkpoint_interval > 0 and (
+            exp.total_frames % exp.config.checkpoint_interval == 0
+        )
+        if checkpoints or over:
+            self.at_checkpoint = spent
+        write_json(
+            self.record,
+            {"cpu_s": spent, "frames": exp.total_frames, "checkpoint_cpu_s": self.at_checkpoint},
+        )
+        if over:
             exp._save_experiment()  # BenchMARL's own checkpoint writer
             raise _BudgetSpentError
 
@@ -101,7 +113,12 @@ def run_reference(
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
     record = out / "budget.json"
-    spent = json.loads(record.read_text())["cpu_s"] if record.is_file() else 0.0
+    resume = _latest_checkpoint(out)
+    # The CPU time up to the checkpoint a resumed run starts from (nothing without one).
+    spent = 0.0
+    if resume is not None and record.is_file():
+        state = json.loads(record.read_text())
+        spent = state.get("checkpoint_cpu_s", state["cpu_s"])
 
     config = ExperimentConfig.get_from_yaml()
     config.save_folder = str(out)
@@ -117,7 +134,6 @@ def run_reference(
     on_policy = algorithm in ("mappo", "ippo")
     config.checkpoint_interval = checkpoint_every * config.collected_frames_per_batch(on_policy)
     config.keep_checkpoints_num = 2
-    resume = _latest_checkpoint(out)
     config.restore_file = str(resume) if resume is not None else None
     budget = CpuBudget(cpu_minutes, spent, record)
     if spent < 60.0 * cpu_minutes:
@@ -132,8 +148,8 @@ def run_reference(
         )
         try:
             experiment.run()
-        except _BudgetSpentError:
-            experiment.close()
+        except _BudgetSpentError:  # BenchMARL closed the experiment (its run() says "failed")
+            pass
     checkpoint = _latest_checkpoint(out)
     env_cfg = eval_config(BUDGETS["quick"])
     policy = load_benchmarl_policy(checkpoint, env_cfg)
