@@ -25,6 +25,7 @@ greedy environments), which are PES's trainer's; a report quoting these runs say
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shlex
 import sys
@@ -146,10 +147,10 @@ def run_reference(
             config=config,
             callbacks=[budget],
         )
-        try:
+        # The budget stops the run by an exception, after which BenchMARL closes the
+        # experiment itself (and prints that it "failed").
+        with contextlib.suppress(_BudgetSpentError):
             experiment.run()
-        except _BudgetSpentError:  # BenchMARL closed the experiment (its run() says "failed")
-            pass
     checkpoint = _latest_checkpoint(out)
     env_cfg = eval_config(BUDGETS["quick"])
     policy = load_benchmarl_policy(checkpoint, env_cfg)
