@@ -577,11 +577,13 @@ def test_an_interrupt_stops_the_run_with_its_files_written(sig, tmp_path):
     proc = subprocess.Popen(
         [*argv, "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
     )
-    while proc.poll() is None and not (out / "config.yaml").is_file():
+    # Into the training loop: its first log row is written (the first steps load the
+    # simulator's compiled kernel, which can take seconds on a busy machine).
+    log = out / "progress.csv"
+    while proc.poll() is None and not (log.is_file() and len(log.read_text().splitlines()) > 1):
         time.sleep(0.05)
-    time.sleep(1.0)  # into the training loop
     proc.send_signal(sig)
-    _, err = proc.communicate()
+    _, err = proc.communicate(timeout=300)
     assert proc.returncode == 130, err
     last = err.strip().splitlines()[-1]  # after the progress bar, one line
     assert last.startswith("stopped:") and "--resume" in last and "Traceback" not in err
