@@ -1,6 +1,7 @@
 """Simulator throughput, side by side with VMAS and MPE2, in one run on one machine.
 
     python benchmarks/bench_sim.py     # CPU: writes benchmarks/results/sim_cpu.json
+    python benchmarks/bench_sim.py --beside-busy --out benchmarks/results/sim_cpu_busy.json
     python benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 \
         --skip-baselines --out benchmarks/results/sim_cuda.json
 
@@ -9,8 +10,8 @@ What is measured (env-steps per second; one env-step = one control step of one g
 * PES batched (``pes.make_env``), full quadrotor model (10 physics sub-steps of eqs. (1)-(2)
   under the attitude PID), 5 pursuers with random actions and the scripted ``flee`` evader,
   episodes desynchronised so that auto-resets happen at their steady rate: as a user gets it
-  (``pes_default``: eager torch, the sub-steps in the compiled CPU kernel of
-  ``pes.sim.kernels``) and, with ``--compiled``, fused by ``torch.compile`` as well.
+  (``pes_default``: the compiled CPU kernels of ``pes.sim.kernels`` with a few eager torch
+  operations around them) and, with ``--compiled``, fused by ``torch.compile`` as well.
 * VMAS ``simple_tag`` with 5 chasers, 1 runner and 8 landmarks, continuous actions, random
   actions, the same batch sizes.
 * The single-environment PettingZoo path: ``pes.pettingzoo.parallel_env()`` (its defaults)
@@ -28,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -125,9 +127,25 @@ def main() -> int:
         "--compiled", action="store_true", help="also the step fused by torch.compile"
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default: 1)")
+    parser.add_argument(
+        "--beside-busy",
+        action="store_true",
+        help="measure beside a second CPU-bound process (a Python busy loop), as contention",
+    )
     parser.add_argument("--out", default="benchmarks/results/sim_cpu.json")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    busy = None
+    if args.beside_busy:
+        busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        return measure(args)
+    finally:
+        if busy is not None:
+            busy.kill()
+
+
+def measure(args: argparse.Namespace) -> int:
 
     config = pes.EnvConfig().validate()
     report: dict = {
@@ -137,6 +155,7 @@ def main() -> int:
         "device": args.device,
         "machine": machine_info(args.device),
         "load_average_before": round(os.getloadavg()[0], 2),
+        "beside_busy_process": args.beside_busy,
         "scenario": "default EnvConfig: 5 pursuers (random actions), flee evader, quadrotor "
         "dynamics with 10 sub-steps, 8 buildings",
         "sizes": [],

@@ -15,7 +15,7 @@ import torch
 from torch import Tensor
 
 from pes.errors import ConfigError
-from pes.sim import rng
+from pes.sim import kernels, rng
 from pes.sim.dynamics import Vehicles
 from pes.sim.geometry import ray_distance
 
@@ -62,15 +62,18 @@ class FleeEvader:
         self.margin, self.lookahead = margin, lookahead
         self.open_space, self.escape, self.threat_radius = open_space, escape, threat_radius
         self.wall_influence, self.wall_repulsion = wall_influence, wall_repulsion
+        self.kernel_constants: dict | None = None  # pes.sim.kernels' copies, built on first use
 
     def __call__(self, v: Vehicles, counters, flags) -> tuple[Tensor, Tensor]:
         alive = flags.alive  # (E, N)
+        if kernels.available(v.x):  # the same numbers, compiled (pes.sim.kernels)
+            return kernels.flee(self, torch.stack(tuple(v)), alive)
         ex, ey, evx, evy = v.x[:, -1], v.y[:, -1], v.vx[:, -1], v.vy[:, -1]  # (E,)
         px, py = v.x[:, :-1], v.y[:, :-1]  # (E, N)
         dx, dy = ex[:, None] - px, ey[:, None] - py  # pursuer -> evader
         dist2 = (dx * dx + dy * dy).clamp(min=1.0)
         # Unit vectors weighted by (threat_radius / d)^2: a far pursuer barely counts.
-        weight = torch.where(alive, self.threat_radius**2 * dist2**-1.5, 0.0)
+        weight = torch.where(alive, self.threat_radius**2 / (dist2 * torch.sqrt(dist2)), 0.0)
         away_x, away_y = (weight * dx).sum(-1), (weight * dy).sum(-1)
         norm = torch.sqrt(away_x * away_x + away_y * away_y)
         cap = torch.clamp(1.5 / norm.clamp(min=1e-9), max=1.0)

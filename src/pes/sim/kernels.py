@@ -1,21 +1,26 @@
-"""Compiled CPU kernels for the hottest loop of the step: the quadrotor's physics sub-steps.
+"""Compiled CPU kernels for the step: the quadrotor's physics sub-steps, the ``flee`` evader,
+the collisions, capture, rewards and history, and the observations.
 
 An eager torch step spends most of its time dispatching small operations (SPEC §6; measured in
-docs/performance.md): the ten sub-steps of :func:`pes.sim.dynamics.quadrotor_step` alone are
-some 700 tensor operations per control step. On the CPU, when torch is not compiling the step,
-that loop runs here instead, as one Numba function that walks every (environment, vehicle)
-once and keeps the whole sub-step loop in registers.
+docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
+whatever its size. On the CPU, when torch is not compiling the step, those parts run here
+instead, as Numba functions that walk every environment once and keep each vehicle's numbers
+in registers.
 
-The kernel repeats :func:`~pes.sim.dynamics.quadrotor_step`'s float32 arithmetic operation by
-operation, in the same order and with the same roundings (a scalar times a tensor rounds the
-scalar to float32 first; ``g / t`` is ``(1 / t) * g``; ``rsqrt`` is ``1 / sqrt``), so both
-paths give the same numbers bit for bit (tests/test_kernels.py). The transcendental functions
-(the attitude setpoint's ``atan``, the initial ``cos`` and ``sin``) stay in torch.
+The kernels repeat the torch code's float32 arithmetic operation by operation, in the same
+order and with the same roundings (a scalar times a tensor rounds the scalar to float32 first;
+``g / t`` is ``(1 / t) * g``; ``rsqrt`` is ``1 / sqrt``), so both paths agree to float32
+rounding (tests/test_kernels.py): the kernels' square root is correctly rounded where torch's
+vectorised one sometimes is not, and the softplus of eq. (9) uses the C library's ``exp``.
+From the same state a step gives the same flags, captures, crashes and resets on both paths;
+trajectories drift apart by rounding over many steps. The transcendental functions that steer
+the vehicles (the attitude setpoint's ``atan``, the initial ``cos`` and ``sin``, the
+disturbance's angle) and the network evader stay in torch.
 
-The kernel itself is in :mod:`pes.sim._numba_substeps`, imported on first use only (so that
-``import pes`` does not import Numba); Numba compiles it then (a few seconds) and caches the
-machine code beside that file, so later processes load it. ``PES_KERNELS=0`` in the
-environment, or a missing ``numba``, selects the torch loop.
+The kernels are in :mod:`pes.sim._numba_substeps` and :mod:`pes.sim._numba_step`, imported on
+first use only (so that ``import pes`` does not import Numba); Numba compiles them then (a few
+seconds) and caches the machine code beside those files, so later processes load it.
+``PES_KERNELS=0`` in the environment, or a missing ``numba``, selects the torch code.
 """
 
 from __future__ import annotations
@@ -28,12 +33,13 @@ from torch import Tensor
 
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
 _kernel = None  # the compiled sub-step loop, once loaded
-_failed = False  # numba is missing or failed: use the torch loop
+_step = None  # the module of the other kernels, once loaded
+_failed = False  # numba is missing or failed: use the torch code
 
 
 def available(t: Tensor) -> bool:
-    """Whether :func:`quadrotor_substeps` serves tensors like ``t``: float32 on the CPU, no
-    gradient, not under ``torch.compile``, and Numba importable (``PES_KERNELS`` not 0)."""
+    """Whether the kernels serve tensors like ``t``: float32 on the CPU, no gradient, not
+    under ``torch.compile``, and Numba importable (``PES_KERNELS`` not 0)."""
     return (
         _ENABLED
         and not _failed
@@ -46,20 +52,35 @@ def available(t: Tensor) -> bool:
 
 
 def _load():
-    """The compiled kernel (compiled or read from Numba's cache on first call), or None."""
-    global _kernel, _failed
+    """The compiled sub-step kernel, the other kernels with it (compiled or read from Numba's
+    cache on first call), or None."""
+    global _kernel, _step, _failed
     if _kernel is None and not _failed:
         try:
+            from pes.sim import _numba_step
             from pes.sim._numba_substeps import substeps
 
             # Compile (or load from the cache) now, for the argument types of every call, so
-            # that a Numba that cannot compile means the torch loop, not an error mid-step.
+            # that a Numba that cannot compile means the torch code, not an error mid-step.
             f32, grid, row = np.float32, np.zeros((1, 1), np.float32), np.ones(1, np.float32)
             cube = np.zeros((13, 1, 1), np.float32)
             trig = np.ones((6, 1, 1), np.float32)
             substeps(cube, trig, grid, grid, grid, grid, cube[:3, 0], row, *[f32(0.1)] * 5, 1)
-            _kernel = substeps
-        except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch loop
+            vehicles = np.ones((16, 1, 2), np.float32)
+            alive = np.ones((1, 1), np.bool_)
+            boxes = np.ones((1, 4), np.float32)
+            _numba_step.observe(vehicles, alive, np.zeros((1, 1), np.int64), *[f32(1)] * 4)
+            rays = np.ones((1, 5), np.float32)
+            consts = np.ones(12, np.float32)
+            _numba_step.flee(vehicles, alive, rays, boxes, boxes[:, :2], *[f32(1)] * 3, consts)
+            counters = np.ones((7, 1), np.int64)
+            history = np.zeros((1, 2, 2, 4), np.float32)
+            ints, consts = np.ones(5, np.int64), np.ones(20, np.float32)
+            _numba_step.collide(
+                vehicles, cube, alive, alive, counters, history, boxes, ints, consts
+            )
+            _kernel, _step = substeps, _numba_step
+        except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch code
             _failed = True
     return _kernel
 
@@ -114,3 +135,199 @@ def quadrotor_substeps(
         int(substeps),
     )
     return torch.from_numpy(out)
+
+
+def _constants(sc) -> dict:
+    """The scenario's constants as the kernels take them (NumPy, float32), built once per
+    :class:`~pes.sim.scenario.Scenario` with the same float32 operations as the torch code."""
+    consts = sc.kernel_constants
+    if consts is not None:
+        return consts
+    from pes.sim.scenario import CONTACT_GAP
+
+    cfg, boxes, f32 = sc.config, sc.boxes, np.float32
+    centre_x, centre_y = (boxes[:, 0] + boxes[:, 2]) * 0.5, (boxes[:, 1] + boxes[:, 3]) * 0.5
+    half_x, half_y = (boxes[:, 2] - boxes[:, 0]) * 0.5, (boxes[:, 3] - boxes[:, 1]) * 0.5
+    lead = cfg.intercept_lead
+    consts = {
+        "boxes": torch.stack([centre_x, centre_y, half_x, half_y], -1).contiguous().numpy(),
+        "other": sc.other_index.contiguous().numpy(),
+        "width": f32(sc.arena[0].item()),
+        "height": f32(sc.arena[1].item()),
+        "vscale": f32(sc.vel_scale),
+        "e_vscale": f32(cfg.evader_max_speed),
+        "ints": np.array(
+            [
+                cfg.capture_count,
+                cfg.capture_hold,
+                cfg.max_steps,
+                cfg.crash_mode == "disable",
+                bool(lead),
+            ],
+            np.int64,
+        ),
+        "floats": np.array(
+            [
+                sc.arena[0].item(),
+                sc.arena[1].item(),
+                cfg.body_radius,
+                cfg.body_radius + CONTACT_GAP,
+                cfg.capture_radius,
+                1.0 / cfg.arena_diagonal,
+                -cfg.cooperation_weight * (1.0 / cfg.arena_diagonal),
+                cfg.self_weight * (1.0 / cfg.arena_diagonal),
+                cfg.safe_distance,
+                cfg.softplus_k,
+                lead,
+                cfg.approach_weight,
+                2.0 * cfg.approach_decel,
+                cfg.encirclement_weight,
+                cfg.crash_reward,
+                cfg.capture_reward,
+                cfg.evader_crash_reward,
+                cfg.evader_capture_reward,
+                sc.vel_scale,
+                0.0,
+            ],
+            np.float32,
+        ),
+    }
+    sc.kernel_constants = consts
+    return consts
+
+
+def observe(sc, vehicles: Tensor, alive: Tensor) -> dict[str, Tensor]:
+    """:func:`pes.sim.scenario.observe` of the packed ``vehicles`` (16, E, A) and ``alive``
+    (E, N): the same dict of views, computed by one kernel call."""
+    k = _constants(sc)
+    obs, mask, state, evader_obs = _step.observe(
+        vehicles.contiguous().numpy(),
+        alive.contiguous().numpy(),
+        k["other"],
+        k["width"],
+        k["height"],
+        k["vscale"],
+        k["e_vscale"],
+    )
+    return {
+        "obs": torch.from_numpy(obs),
+        "obs_mask": torch.from_numpy(mask),
+        "state": torch.from_numpy(state),
+        "evader_obs": torch.from_numpy(evader_obs),
+    }
+
+
+def flee(evader, vehicles: Tensor, alive: Tensor) -> tuple[Tensor, Tensor]:
+    """:class:`pes.sim.evader.FleeEvader`'s action for the packed ``vehicles`` (16, E, A) and
+    ``alive`` (E, N): ax, ay (E,) in [-1, 1], by one kernel call."""
+    k = evader.kernel_constants
+    if k is None:
+        f32, margin = np.float32, evader.margin
+        d = evader.directions
+        tiny = d.abs() < 1e-9
+        inv = 1.0 / torch.where(tiny, 1e-9, d)
+        flat = tiny[:, 0].float() + 2 * tiny[:, 1].float()
+        boxes = evader.boxes
+        grown = torch.stack(
+            [
+                boxes[:, 0] - margin,
+                boxes[:, 1] - margin,
+                boxes[:, 2] + margin,
+                boxes[:, 3] + margin,
+            ],
+            -1,
+        )
+        centre = torch.stack(
+            [(boxes[:, 0] + boxes[:, 2]) * 0.5, (boxes[:, 1] + boxes[:, 3]) * 0.5], -1
+        )
+        consts = [
+            evader.max_speed,
+            evader.lookahead,
+            evader.threat_radius**2,
+            evader.wall_influence,
+            evader.wall_repulsion,
+            evader.open_space,
+            evader.escape,
+            0.3 * evader.max_accel,
+        ]
+        k = {
+            "rays": torch.cat([d, inv, flat[:, None]], -1).contiguous().numpy(),
+            "grown": grown.reshape(-1, 4).contiguous().numpy(),
+            "centre": centre.reshape(-1, 2).contiguous().numpy(),
+            "width_in": f32((evader.arena[0] - margin).item()),
+            "height_in": f32((evader.arena[1] - margin).item()),
+            "margin": f32(margin),
+            "floats": np.array(consts + [0.0] * (12 - len(consts)), np.float32),
+        }
+        evader.kernel_constants = k
+    ax, ay = _step.flee(
+        vehicles.contiguous().numpy(),
+        alive.contiguous().numpy(),
+        k["rays"],
+        k["grown"],
+        k["centre"],
+        k["width_in"],
+        k["height_in"],
+        k["margin"],
+        k["floats"],
+    )
+    return torch.from_numpy(ax), torch.from_numpy(ay)
+
+
+def collide(
+    sc, state: dict[str, Tensor], moved: Tensor
+) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+    """The rest of :func:`pes.sim.scenario.advance` once the dynamics have moved the vehicles:
+    ``state`` is the packed state before the step, ``moved`` (13, E, A) the dynamics' first 13
+    fields. Returns ``advance``'s stepped state and outputs."""
+    k = _constants(sc)
+    flags = state["flags"]
+    (
+        vehicles,
+        counters,
+        alive,
+        history,
+        reward,
+        evader_reward,
+        terminated,
+        truncated,
+        success,
+        crashed,
+        evader_contact,
+        distances,
+        positions,
+        velocities,
+    ) = _step.collide(
+        state["vehicles"].contiguous().numpy(),
+        moved.contiguous().numpy(),
+        flags[0].contiguous().numpy(),
+        flags[1].contiguous().numpy(),
+        state["counters"].contiguous().numpy(),
+        state["history"].contiguous().numpy(),
+        k["boxes"],
+        k["ints"],
+        k["floats"],
+    )
+    counters_t, alive_t = torch.from_numpy(counters), torch.from_numpy(alive)
+    stepped = {
+        "vehicles": torch.from_numpy(vehicles),
+        "counters": counters_t,
+        "flags": torch.stack([alive_t, flags[1]]),
+        "history": torch.from_numpy(history),
+    }
+    out = {
+        "steps": counters_t[3].clone(),
+        "crashes": counters_t[5].clone(),
+        "alive": alive_t,
+        "reward": torch.from_numpy(reward),
+        "evader_reward": torch.from_numpy(evader_reward),
+        "terminated": torch.from_numpy(terminated),
+        "truncated": torch.from_numpy(truncated),
+        "success": torch.from_numpy(success),
+        "crashed": torch.from_numpy(crashed),
+        "evader_contact": torch.from_numpy(evader_contact),
+        "distances": torch.from_numpy(distances),
+        "positions": torch.from_numpy(positions),
+        "velocities": torch.from_numpy(velocities),
+    }
+    return stepped, out

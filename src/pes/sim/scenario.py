@@ -34,7 +34,7 @@ from torch import Tensor
 from torch.nn.functional import softplus
 
 from pes.errors import ConfigError
-from pes.sim import rng
+from pes.sim import kernels, rng
 from pes.sim.config import EnvConfig
 from pes.sim.dynamics import (
     GRAVITY,
@@ -129,6 +129,7 @@ class Scenario:
     vel_scale: float  # pursuer max speed, m/s: velocity normaliser of observations
     evader_policy: EvaderPolicy | None = field(default=None)
     roadmap: Roadmap | None = field(default=None)  # distance_metric="geodesic" only
+    kernel_constants: dict | None = field(default=None, repr=False)  # pes.sim.kernels' copies
 
     @property
     def num_pursuers(self) -> int:
@@ -247,6 +248,8 @@ def observe(sc: Scenario, v: Vehicles, f: Flags) -> dict[str, Tensor]:
             [position and velocity relative to the evader, vector from it to its nearest
             obstacle, 0, 0] (zero if dead). Velocities divided by the evader's max speed.
     """
+    if kernels.available(v.x):  # the same numbers, compiled (pes.sim.kernels)
+        return kernels.observe(sc, torch.stack(tuple(v)), f.alive)
     n = sc.num_pursuers
     alive = f.alive
     width, height = sc.arena[0], sc.arena[1]
@@ -501,6 +504,8 @@ def advance(
 
     dynamics = quadrotor_step if cfg.dynamics == "quadrotor" else point_mass_step
     moved = dynamics(v, ax, ay, fx, fy, p, cfg.dt, cfg.physics_substeps)
+    if sc.roadmap is None and kernels.available(v.x):  # the rest, compiled (pes.sim.kernels)
+        return kernels.collide(sc, state, torch.stack(moved[:13]))
     # Dead pursuers stay where they fell, at rest.
     moved = Vehicles(
         *(
@@ -631,8 +636,11 @@ def step_core(
     :func:`observe` (``obs``, ``obs_mask``, ``state``, ``evader_obs``).
     """
     stepped, out = advance(sc, state, actions, evader_action)
-    v, _, f = unpack(stepped)
-    out.update(observe(sc, v, f))
+    if kernels.available(stepped["vehicles"]):
+        out.update(kernels.observe(sc, stepped["vehicles"], stepped["flags"][0]))
+    else:
+        v, _, f = unpack(stepped)
+        out.update(observe(sc, v, f))
     return stepped, out
 
 

@@ -1,0 +1,471 @@
+"""The Numba kernels of :mod:`pes.sim.kernels` for the rest of the step (imported on first use
+only): the ``flee`` evader, the collisions, capture, rewards and history of
+:func:`pes.sim.scenario.advance`, and :func:`pes.sim.scenario.observe`.
+
+Each function walks the environments once and repeats the torch code's float32 arithmetic
+operation by operation: every constant arrives as a float32 argument (torch rounds a Python
+scalar to the tensor's dtype before it operates), ``s / t`` for a scalar ``s`` is
+``(1 / t) * s`` (as torch's ``__rtruediv__``), minima and maxima keep the first index on ties.
+The results agree with the torch path's to float32 rounding (see :mod:`pes.sim.kernels`).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_ZERO, _ONE, _TWO = np.float32(0.0), np.float32(1.0), np.float32(2.0)
+_INF, _BIG = np.float32(np.inf), np.float32(1e6)
+_TINY_NORM, _MIN_DIST = np.float32(1e-9), np.float32(1e-3)
+_CAP, _FORTY, _SOFTPLUS_LINEAR = np.float32(1.5), np.float32(40.0), np.float32(20.0)
+_MIN_GAP = np.float32(1e-6)
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # IEEE division, as torch
+
+
+@_jit
+def obstacles(px, py, cx, cy, hx, hy, width, height, dist, nx, ny):
+    """Signed distance and outward normal of every obstacle from (px, py): the B buildings of
+    centres (cx, cy) and half sizes (hx, hy), then the walls (left, right, bottom, top), into
+    ``dist``, ``nx``, ``ny`` (B + 4,) (:func:`pes.sim.geometry.obstacle_distances_xy`)."""
+    num_boxes = cx.shape[0]
+    for b in range(num_boxes):
+        rx, ry = px - cx[b], py - cy[b]
+        ex, ey = abs(rx) - hx[b], abs(ry) - hy[b]
+        sx = _ONE if rx >= _ZERO else -_ONE
+        sy = _ONE if ry >= _ZERO else -_ONE
+        ox = ex if ex > _ZERO else _ZERO
+        oy = ey if ey > _ZERO else _ZERO
+        out_len = np.sqrt(ox * ox + oy * oy)
+        inner = ex if ex >= ey else ey
+        if inner > _ZERO:
+            inner = _ZERO
+        dist[b] = out_len + inner
+        inv = _ONE / (out_len if out_len > np.float32(1e-12) else np.float32(1e-12))
+        if out_len > _ZERO:
+            nx[b], ny[b] = sx * ox * inv, sy * oy * inv
+        elif ex >= ey:
+            nx[b], ny[b] = sx, _ZERO
+        else:
+            nx[b], ny[b] = _ZERO, sy
+    dist[num_boxes], nx[num_boxes], ny[num_boxes] = px, _ONE, _ZERO
+    dist[num_boxes + 1], nx[num_boxes + 1], ny[num_boxes + 1] = width - px, -_ONE, _ZERO
+    dist[num_boxes + 2], nx[num_boxes + 2], ny[num_boxes + 2] = py, _ZERO, _ONE
+    dist[num_boxes + 3], nx[num_boxes + 3], ny[num_boxes + 3] = height - py, _ZERO, -_ONE
+
+
+@_jit
+def nearest(dist, num_boxes):
+    """Index of the nearest obstacle in ``dist`` (B + 4,), with
+    :func:`pes.sim.geometry.pick_nearest`'s choice on ties."""
+    index = num_boxes
+    for k in range(num_boxes + 1, num_boxes + 4):
+        if dist[k] < dist[index]:
+            index = k
+    if num_boxes > 0:
+        box = 0
+        for k in range(1, num_boxes):
+            if dist[k] < dist[box]:
+                box = k
+        if dist[box] < dist[index]:
+            index = box
+    return index
+
+
+@_jit
+def _per_axis(moves):
+    """The largest move each way of ``moves`` (K,), combined (``scenario._per_axis``)."""
+    top, bottom = moves[0], moves[0]
+    for k in range(1, moves.shape[0]):
+        if moves[k] > top:
+            top = moves[k]
+        if moves[k] < bottom:
+            bottom = moves[k]
+    return (top if top > _ZERO else _ZERO) + (bottom if bottom < _ZERO else _ZERO)
+
+
+@_jit
+def _softplus_term(distance, safe, k):
+    """``scenario.softplus_obstacle_term``: softplus((safe - distance) / k) * k."""
+    z = (safe - distance) / k
+    return (z if z > _SOFTPLUS_LINEAR else np.log1p(np.exp(z))) * k
+
+
+@_jit
+def observe(vehicles, alive, other, width, height, vscale, e_vscale):
+    """:func:`pes.sim.scenario.observe` of ``vehicles`` (16, E, A) and ``alive`` (E, N); returns
+    obs (E, N, N, 8), obs_mask (E, N, N), state (E, A, 8) and evader_obs (E, A, 8)."""
+    num_envs, n = alive.shape
+    obs = np.zeros((num_envs, n, n, 8), np.float32)
+    mask = np.zeros((num_envs, n, n), np.bool_)
+    state = np.zeros((num_envs, n + 1, 8), np.float32)
+    evader_obs = np.zeros((num_envs, n + 1, 8), np.float32)
+    rows = np.empty((n, 8), np.float32)
+    for e in range(num_envs):
+        epx, epy = vehicles[0, e, n] / width, vehicles[1, e, n] / height
+        eqx, eqy = vehicles[14, e, n] / width, vehicles[15, e, n] / height
+        for i in range(n):
+            px, py = vehicles[0, e, i] / width, vehicles[1, e, i] / height
+            rows[i, 0], rows[i, 1] = px, py
+            rows[i, 2], rows[i, 3] = vehicles[2, e, i] / vscale, vehicles[3, e, i] / vscale
+            rows[i, 4], rows[i, 5] = vehicles[14, e, i] / width, vehicles[15, e, i] / height
+            rows[i, 6], rows[i, 7] = epx - px, epy - py
+        for i in range(n):
+            for k in range(n):
+                j = other[i, k]
+                real = alive[e, j] and alive[e, i]
+                mask[e, i, k] = real
+                keep = _ONE if real else _ZERO
+                for f in range(8):
+                    value = rows[j, f]
+                    if k > 0 and f < 4:  # rows of others: position and velocity relative to i
+                        value = value - rows[i, f]
+                    obs[e, i, k, f] = value * keep
+            keep = _ONE if alive[e, i] else _ZERO
+            for f in range(8):
+                state[e, i, f] = rows[i, f] * keep
+        state[e, n, 0], state[e, n, 1] = epx, epy
+        state[e, n, 2], state[e, n, 3] = vehicles[2, e, n] / vscale, vehicles[3, e, n] / vscale
+        state[e, n, 4], state[e, n, 5] = eqx, eqy
+        # The evader's view: itself, with the vector to the nearest alive pursuer, then each.
+        best, best_gap = 0, _INF
+        for i in range(n):
+            gap = rows[i, 6] * rows[i, 6] + rows[i, 7] * rows[i, 7] if alive[e, i] else _INF
+            if gap < best_gap:
+                best, best_gap = i, gap
+        evx, evy = vehicles[2, e, n], vehicles[3, e, n]
+        evader_obs[e, 0, 0], evader_obs[e, 0, 1] = epx, epy
+        evader_obs[e, 0, 2], evader_obs[e, 0, 3] = evx / e_vscale, evy / e_vscale
+        evader_obs[e, 0, 4], evader_obs[e, 0, 5] = eqx, eqy
+        evader_obs[e, 0, 6], evader_obs[e, 0, 7] = -rows[best, 6], -rows[best, 7]
+        for i in range(n):
+            keep = _ONE if alive[e, i] else _ZERO
+            row = evader_obs[e, 1 + i]
+            row[0], row[1] = -rows[i, 6] * keep, -rows[i, 7] * keep
+            row[2] = (vehicles[2, e, i] - evx) / e_vscale * keep
+            row[3] = (vehicles[3, e, i] - evy) / e_vscale * keep
+            row[4], row[5] = rows[i, 4] * keep, rows[i, 5] * keep
+            row[6], row[7] = _ZERO * keep, _ZERO * keep
+    return obs, mask, state, evader_obs
+
+
+@_jit
+def flee(vehicles, alive, rays, box_grown, box_centre, width_in, height_in, margin, p):
+    """The ``flee`` evader's action (:class:`pes.sim.evader.FleeEvader`) for ``vehicles``
+    (16, E, A) and ``alive`` (E, N).
+
+    ``rays`` (M, 5): direction x, y, their reciprocals (1e-9 for a zero component) and 1 where
+    the x component is zero, 2 where y is, 3 where both are (0 otherwise); ``box_grown`` (B, 4)
+    the buildings grown by ``margin``; ``box_centre`` (B, 2); ``width_in``, ``height_in`` the
+    arena's size less ``margin``. ``p`` (12,) float32: max speed, lookahead, threat radius
+    squared, wall influence, wall repulsion, open space, escape, 0.3 * max accel, and spare.
+    Returns ax, ay (E,) in [-1, 1]."""
+    num_envs, n = alive.shape
+    num_rays, num_boxes = rays.shape[0], box_grown.shape[0]
+    max_speed, lookahead, threat2 = p[0], p[1], p[2]
+    influence, repulsion, open_space, escape, accel = p[3], p[4], p[5], p[6], p[7]
+    out_x = np.empty(num_envs, np.float32)
+    out_y = np.empty(num_envs, np.float32)
+    free = np.empty(num_rays, np.float32)
+    for e in range(num_envs):
+        ex, ey = vehicles[0, e, n], vehicles[1, e, n]
+        evx, evy = vehicles[2, e, n], vehicles[3, e, n]
+        away_x, away_y = _ZERO, _ZERO
+        for i in range(n):
+            dx, dy = ex - vehicles[0, e, i], ey - vehicles[1, e, i]
+            dist2 = dx * dx + dy * dy
+            if dist2 < _ONE:
+                dist2 = _ONE
+            weight = (_ONE / (dist2 * np.sqrt(dist2))) * threat2 if alive[e, i] else _ZERO
+            away_x = away_x + weight * dx
+            away_y = away_y + weight * dy
+        norm = np.sqrt(away_x * away_x + away_y * away_y)
+        cap = (_ONE / (norm if norm > _TINY_NORM else _TINY_NORM)) * _CAP
+        if cap > _ONE:
+            cap = _ONE
+        away_x, away_y = away_x * cap, away_y * cap
+        d = vehicles[13, e, n]
+        if d < _MIN_DIST:
+            d = _MIN_DIST
+        push = (influence - d) / influence
+        if push < _ZERO:
+            push = _ZERO
+        push = push * push / d
+        away_x = away_x - repulsion * push * vehicles[14, e, n]
+        away_y = away_y - repulsion * push * vehicles[15, e, n]
+        # Ray casts (pes.sim.geometry.ray_distance).
+        for m in range(num_rays):
+            ux, uy, inv_x, inv_y, flat = rays[m, 0], rays[m, 1], rays[m, 2], rays[m, 3], rays[m, 4]
+            wall_x = (width_in - ex) * inv_x if ux > _ZERO else (margin - ex) * inv_x
+            wall_y = (height_in - ey) * inv_y if uy > _ZERO else (margin - ey) * inv_y
+            if flat == 1 or flat == 3:
+                wall_x = lookahead
+            if flat == 2 or flat == 3:
+                wall_y = lookahead
+            dist = wall_x if wall_x <= wall_y else wall_y
+            if dist < _ZERO:
+                dist = _ZERO
+            if dist > lookahead:
+                dist = lookahead
+            if num_boxes > 0:
+                t_min = _INF
+                for b in range(num_boxes):
+                    tx0 = (box_grown[b, 0] - ex) * inv_x
+                    tx1 = (box_grown[b, 2] - ex) * inv_x
+                    ty0 = (box_grown[b, 1] - ey) * inv_y
+                    ty1 = (box_grown[b, 3] - ey) * inv_y
+                    t_enter = max(min(tx0, tx1), min(ty0, ty1))
+                    t_exit = min(max(tx0, tx1), max(ty0, ty1))
+                    hit = t_enter <= t_exit and t_exit > _ZERO
+                    towards = ux * (box_centre[b, 0] - ex) + uy * (box_centre[b, 1] - ey) > _ZERO
+                    hit = hit and (not t_enter < _ZERO or towards)
+                    t_hit = (t_enter if t_enter > _ZERO else _ZERO) if hit else lookahead
+                    if t_hit < t_min:
+                        t_min = t_hit
+                if t_min < dist:
+                    dist = t_min
+            free[m] = dist
+        best, best_score = 0, -_INF
+        for m in range(num_rays):
+            ux, uy = rays[m, 0], rays[m, 1]
+            t = free[m] / max_speed
+            gap = _BIG
+            for i in range(n):
+                if alive[e, i]:
+                    gx = (ex + ux * free[m]) - (vehicles[0, e, i] + vehicles[2, e, i] * t)
+                    gy = (ey + uy * free[m]) - (vehicles[1, e, i] + vehicles[3, e, i] * t)
+                    g = gx * gx + gy * gy
+                    if g < gap:
+                        gap = g
+            score = ux * away_x + uy * away_y
+            score = score + open_space * free[m] / lookahead
+            root = np.sqrt(gap)
+            score = score + escape * (root if root < _FORTY else _FORTY) / _FORTY
+            score = score - _TWO * (_ONE if free[m] < _TWO else _ZERO)
+            if score > best_score or m == 0:
+                best, best_score = m, score
+        best_free = free[best] / np.float32(3.0)
+        target_speed = max_speed * (best_free if best_free < _ONE else _ONE)
+        ax = (rays[best, 0] * target_speed - evx) / accel
+        ay = (rays[best, 1] * target_speed - evy) / accel
+        norm = np.sqrt(ax * ax + ay * ay)
+        if norm < _ONE:
+            norm = _ONE
+        out_x[e], out_y[e] = ax / norm, ay / norm
+    return out_x, out_y
+
+
+@_jit
+def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints, p):
+    """The part of :func:`pes.sim.scenario.advance` after the dynamics: collisions, damage,
+    capture, rewards and the history frame.
+
+    Args:
+        vehicles: (16, E, A) the state before the step; moved: (13, E, A) after the dynamics
+            (dead pursuers not yet held in place). alive0, damage_mask: (E, N) bool.
+        counters: (7, E) int64 (:class:`~pes.sim.scenario.Counters`). history: (E, H, A, 4).
+        boxes: (B, 4) buildings as centre x, y and half size x, y.
+        ints: (5,) int64 capture count, capture hold, max steps, crashes disable (0/1),
+            intercept lead on (0/1).
+        p: (20,) float32 constants: see :func:`pes.sim.kernels.collide`.
+
+    Returns the stepped vehicles (16, E, A), counters (7, E), alive (E, N), history, and the
+    step's reward (E, N), evader reward (E,), terminated, truncated, success (E,), crashed
+    (E, N), evader contact (E,), distances (E, N), positions and velocities (E, A, 2).
+    """
+    num_envs, n = alive0.shape
+    num_vehicles, num_boxes = n + 1, boxes.shape[0]
+    num_obstacles = num_boxes + 4
+    capture_count, capture_hold, max_steps = ints[0], ints[1], ints[2]
+    disable, lead_on = ints[3] != 0, ints[4] != 0
+    width, height, radius, radius_gap, capture_radius = p[0], p[1], p[2], p[3], p[4]
+    rho, co_rho, self_rho, safe, k_soft = p[5], p[6], p[7], p[8], p[9]
+    lead, approach, two_decel, encircle = p[10], p[11], p[12], p[13]
+    crash_r, capture_r, e_crash_r, e_capture_r, vscale = p[14], p[15], p[16], p[17], p[18]
+
+    out_v = np.empty_like(vehicles)
+    out_c = counters.copy()
+    alive = np.empty_like(alive0)
+    out_h = np.empty_like(history)
+    reward = np.empty((num_envs, n), np.float32)
+    evader_reward = np.empty(num_envs, np.float32)
+    terminated = np.empty(num_envs, np.bool_)
+    truncated = np.empty(num_envs, np.bool_)
+    success = np.empty(num_envs, np.bool_)
+    crashed = np.empty((num_envs, n), np.bool_)
+    evader_contact = np.empty(num_envs, np.bool_)
+    distances = np.empty((num_envs, n), np.float32)
+    positions = np.empty((num_envs, num_vehicles, 2), np.float32)
+    velocities = np.empty((num_envs, num_vehicles, 2), np.float32)
+
+    dists = np.empty(num_obstacles, np.float32)
+    nxs = np.empty(num_obstacles, np.float32)
+    nys = np.empty(num_obstacles, np.float32)
+    moves = np.empty(num_obstacles, np.float32)
+    inward_e = np.empty(num_obstacles, np.float32)
+    inward = np.empty(num_vehicles, np.float32)
+    dist = np.empty(num_vehicles, np.float32)
+    contact = np.empty(num_vehicles, np.bool_)
+    cx, cy, hx, hy = boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3]
+
+    for e in range(num_envs):
+        for a in range(num_vehicles):
+            active = a == n or alive0[e, a]
+            for f in range(13):
+                if active:
+                    out_v[f, e, a] = moved[f, e, a]
+                else:
+                    out_v[f, e, a] = vehicles[f, e, a] if f < 2 else _ZERO
+            x, y, vx, vy = out_v[0, e, a], out_v[1, e, a], out_v[2, e, a], out_v[3, e, a]
+            # Push out of the nearest obstacle along its normal.
+            obstacles(x, y, cx, cy, hx, hy, width, height, dists, nxs, nys)
+            index = nearest(dists, num_boxes)
+            d, nx, ny = dists[index], nxs[index], nys[index]
+            hit = d < radius
+            push = radius_gap - d if hit else _ZERO
+            x, y = x + nx * push, y + ny * push
+            d = d + push
+            inward[a] = min(vx * nx + vy * ny, _ZERO)
+            if hit and a < n:
+                vx, vy = _ZERO, _ZERO
+            elif hit:
+                vx, vy = vx - inward[a] * nx, vy - inward[a] * ny
+            for k in range(num_obstacles):
+                dists[k] = dists[k] + nxs[k] * (nx * push) + nys[k] * (ny * push)
+            # Then out of every other obstacle still within the radius (resolve_contacts).
+            touched = False
+            for k in range(num_obstacles):
+                if dists[k] < radius:
+                    touched = True
+            if touched:
+                for k in range(num_obstacles):
+                    moves[k] = nxs[k] * (radius_gap - dists[k] if dists[k] < radius else _ZERO)
+                step_x = _per_axis(moves)
+                for k in range(num_obstacles):
+                    moves[k] = nys[k] * (radius_gap - dists[k] if dists[k] < radius else _ZERO)
+                step_y = _per_axis(moves)
+                x, y = x + step_x, y + step_y
+                over = dists < radius
+                for k in range(num_obstacles):
+                    dists[k] = dists[k] + nxs[k] * step_x + nys[k] * step_y
+                if a < n:
+                    vx, vy = _ZERO, _ZERO
+                else:
+                    for k in range(num_obstacles):
+                        toward = min(vx * nxs[k] + vy * nys[k], _ZERO)
+                        inward_e[k] = toward if over[k] else _ZERO
+                    for k in range(num_obstacles):
+                        moves[k] = inward_e[k] * nxs[k]
+                    slide_x = vx - _per_axis(moves)
+                    for k in range(num_obstacles):
+                        moves[k] = inward_e[k] * nys[k]
+                    vx, vy = slide_x, vy - _per_axis(moves)
+                index = nearest(dists, num_boxes)
+                d, nx, ny = dists[index], nxs[index], nys[index]
+            contact[a] = hit or touched
+            dist[a] = d
+            out_v[0, e, a], out_v[1, e, a], out_v[2, e, a], out_v[3, e, a] = x, y, vx, vy
+            out_v[13, e, a], out_v[14, e, a], out_v[15, e, a] = d, -nx * d, -ny * d
+            positions[e, a, 0], positions[e, a, 1] = x, y
+            velocities[e, a, 0], velocities[e, a, 1] = vx, vy
+
+        step = counters[3, e] + 1
+        damaged_now = step >= counters[6, e]
+        ex, ey = out_v[0, e, n], out_v[1, e, n]
+        near, alive_count, alive0_any = 0, 0, False
+        nearest_gap = _INF
+        crash_count = 0
+        for i in range(n):
+            crashed[e, i] = contact[i] and alive0[e, i]
+            crash_count += 1 if crashed[e, i] else 0
+            on = alive0[e, i] and not (disable and crashed[e, i])
+            alive[e, i] = on and not (damage_mask[e, i] and damaged_now)
+            dx, dy = out_v[0, e, i] - ex, out_v[1, e, i] - ey
+            distances[e, i] = np.sqrt(dx * dx + dy * dy)
+            if distances[e, i] < capture_radius and alive[e, i]:
+                near += 1
+            alive_count += 1 if alive[e, i] else 0
+            if alive0[e, i]:
+                alive0_any = True
+                if distances[e, i] < nearest_gap:
+                    nearest_gap = distances[e, i]
+        hold = counters[4, e] + 1 if near >= capture_count else 0
+        success[e] = hold >= capture_hold
+        terminated[e] = success[e] or alive_count < capture_count
+        truncated[e] = step >= max_steps and not terminated[e]
+        evader_contact[e] = contact[n]
+
+        # Rewards, eqs. (8)-(9).
+        paid_sum = _ZERO
+        for i in range(n):
+            paid_sum = paid_sum + distances[e, i] * (_ONE if alive0[e, i] else _ZERO)
+        r_co = co_rho * paid_sum
+        unit_x, unit_y, count = _ZERO, _ZERO, _ZERO
+        if encircle != _ZERO:
+            for i in range(n):
+                a0 = _ONE if alive0[e, i] else _ZERO
+                gap = distances[e, i] if distances[e, i] > _MIN_GAP else _MIN_GAP
+                unit_x = unit_x + (out_v[0, e, i] - ex) / gap * a0
+                unit_y = unit_y + (out_v[1, e, i] - ey) / gap * a0
+                count = count + a0
+            if count < _ONE:
+                count = _ONE
+        evx, evy = out_v[2, e, n], out_v[3, e, n]
+        for i in range(n):
+            a0 = _ONE if alive0[e, i] else _ZERO
+            own = distances[e, i]
+            if lead_on:
+                lead_x = (out_v[0, e, i] - ex) - evx * lead
+                lead_y = (out_v[1, e, i] - ey) - evy * lead
+                chaser = alive0[e, i] and distances[e, i] == nearest_gap
+                if not chaser:
+                    own = np.sqrt(lead_x * lead_x + lead_y * lead_y)
+            r_self = -(self_rho * own + _softplus_term(dist[i], safe, k_soft))
+            if approach != _ZERO:
+                gap = dist[i] - radius
+                if gap < _ZERO:
+                    gap = _ZERO
+                over = -inward[i] - np.sqrt(two_decel * gap)
+                r_self = r_self - approach * (over if over > _ZERO else _ZERO)
+            r = r_co + r_self
+            if encircle != _ZERO:
+                r = r - encircle * np.sqrt(unit_x * unit_x + unit_y * unit_y) / count
+            r = r + crash_r * (_ONE if crashed[e, i] else _ZERO)
+            r = r + capture_r * (_ONE if success[e] else _ZERO)
+            reward[e, i] = r * a0
+        gap_paid = nearest_gap if alive0_any else _ZERO
+        evader_reward[e] = (
+            rho * gap_paid
+            - _softplus_term(dist[n], safe, k_soft)
+            + e_crash_r * (_ONE if contact[n] else _ZERO)
+            + e_capture_r * (_ONE if success[e] else _ZERO)
+        )
+        out_c[3, e], out_c[4, e], out_c[5, e] = step, hold, counters[5, e] + crash_count
+
+        frames = history.shape[1]
+        for t in range(frames - 1):
+            for a in range(num_vehicles):
+                for f in range(4):
+                    out_h[e, t, a, f] = history[e, t + 1, a, f]
+        for a in range(num_vehicles):
+            keep = _ONE if a == n or alive[e, a] else _ZERO
+            out_h[e, frames - 1, a, 0] = out_v[0, e, a] / width * keep
+            out_h[e, frames - 1, a, 1] = out_v[1, e, a] / height * keep
+            out_h[e, frames - 1, a, 2] = out_v[2, e, a] / vscale * keep
+            out_h[e, frames - 1, a, 3] = out_v[3, e, a] / vscale * keep
+    return (
+        out_v,
+        out_c,
+        alive,
+        out_h,
+        reward,
+        evader_reward,
+        terminated,
+        truncated,
+        success,
+        crashed,
+        evader_contact,
+        distances,
+        positions,
+        velocities,
+    )
