@@ -6,7 +6,10 @@ Each function walks the environments once and repeats the torch code's float32 a
 operation by operation: every constant arrives as a float32 argument (torch rounds a Python
 scalar to the tensor's dtype before it operates), ``s / t`` for a scalar ``s`` is
 ``(1 / t) * s`` (as torch's ``__rtruediv__``), minima and maxima keep the first index on ties.
-The results agree with the torch path's to float32 rounding (see :mod:`pes.sim.kernels`).
+``move`` covers the commands of the quadrotor model as well (the actions' clipping and the
+attitude setpoint, :func:`pes.sim.dynamics.attitude_setpoint`), with the C library's ``atan``
+and ``cos``. The results agree with the torch path's to float32 rounding (see
+:mod:`pes.sim.kernels`).
 """
 
 from __future__ import annotations
@@ -14,11 +17,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from pes.sim._numba_substeps import vehicle_substeps
+
 _ZERO, _ONE, _TWO = np.float32(0.0), np.float32(1.0), np.float32(2.0)
 _INF, _BIG = np.float32(np.inf), np.float32(1e6)
 _TINY_NORM, _MIN_DIST = np.float32(1e-9), np.float32(1e-3)
 _CAP, _FORTY, _SOFTPLUS_LINEAR = np.float32(1.5), np.float32(40.0), np.float32(20.0)
-_MIN_GAP = np.float32(1e-6)
+_MIN_GAP, _GRAVITY = np.float32(1e-6), np.float32(9.81)
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # IEEE division, as torch
 
@@ -253,6 +258,73 @@ def flee(vehicles, alive, rays, box_grown, box_centre, width_in, height_in, marg
             norm = _ONE
         out_x[e], out_y[e] = ax / norm, ay / norm
     return out_x, out_y
+
+
+@_jit
+def move(vehicles, actions, evader_ax, evader_ay, alive0, fx, fy, params, max_speed, p, n_sub):
+    """The quadrotors' commands and dynamics of :func:`pes.sim.scenario.advance`: each pursuer's
+    action (zero if dead) and the evader's, as accelerations clipped to the maximum, the
+    attitude setpoints, and ``n_sub`` physics sub-steps.
+
+    Args:
+        vehicles: (16, E, A) the state. actions: (E, N, 2) in [-1, 1]. evader_ax, evader_ay:
+            (E,). alive0: (E, N) bool. fx, fy: (E, A) disturbance forces (N), or (0, 0) for
+            none. params: (5, A) max acceleration, mass and the gyroscopic ratios of roll, pitch
+            and yaw. max_speed: (A,). p: (6,) float32 sub-step length, setpoint weight, kp, ki,
+            kd, max tilt.
+
+    Returns the first 13 fields after the step, (13, E, A), dead pursuers not yet held.
+    """
+    num_envs, n = alive0.shape
+    h, b, kp, ki, kd, tilt = p[0], p[1], p[2], p[3], p[4], p[5]
+    disturbed = fx.shape[0] > 0
+    out = np.empty((13, num_envs, n + 1), np.float32)
+    trig = np.empty(6, np.float32)
+    for e in range(num_envs):
+        for a in range(n + 1):
+            if a < n:
+                on = _ONE if alive0[e, a] else _ZERO
+                ax, ay = actions[e, a, 0] * on, actions[e, a, 1] * on
+            else:
+                on = _ONE
+                ax, ay = evader_ax[e], evader_ay[e]
+            limit = params[0, a]
+            ax, ay = ax * limit, ay * limit
+            scale = limit * (_ONE / np.sqrt(ax * ax + ay * ay + np.float32(1e-12)))
+            if scale > _ONE:
+                scale = _ONE
+            ax, ay = ax * scale, ay * scale
+            pitch_ref = np.arctan(ax / _GRAVITY)
+            pitch_ref = min(max(pitch_ref, -tilt), tilt)
+            roll_ref = np.arctan(-ay * np.cos(pitch_ref) / _GRAVITY)
+            roll_ref = min(max(roll_ref, -tilt), tilt)
+            ex, ey = _ZERO, _ZERO
+            if disturbed:
+                ex, ey = fx[e, a] * on / params[1, a], fy[e, a] * on / params[1, a]
+            for k in range(3):
+                trig[k] = np.cos(vehicles[4 + k, e, a])
+                trig[3 + k] = np.sin(vehicles[4 + k, e, a])
+            moved = vehicle_substeps(
+                vehicles[:, e, a],
+                trig,
+                roll_ref,
+                pitch_ref,
+                ex,
+                ey,
+                params[2, a],
+                params[3, a],
+                params[4, a],
+                max_speed[a],
+                h,
+                b,
+                kp,
+                ki,
+                kd,
+                n_sub,
+            )
+            for f in range(13):
+                out[f, e, a] = moved[f]
+    return out
 
 
 @_jit

@@ -1,5 +1,5 @@
-"""Compiled CPU kernels for the step: the quadrotor's physics sub-steps, the ``flee`` evader,
-the collisions, capture, rewards and history, and the observations.
+"""Compiled CPU kernels for the step: the quadrotors' commands and physics sub-steps, the
+``flee`` evader, the collisions, capture, rewards and history, and the observations.
 
 An eager torch step spends most of its time dispatching small operations (SPEC §6; measured in
 docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
@@ -11,11 +11,10 @@ The kernels repeat the torch code's float32 arithmetic operation by operation, i
 order and with the same roundings (a scalar times a tensor rounds the scalar to float32 first;
 ``g / t`` is ``(1 / t) * g``; ``rsqrt`` is ``1 / sqrt``), so both paths agree to float32
 rounding (tests/test_kernels.py): the kernels' square root is correctly rounded where torch's
-vectorised one sometimes is not, and the softplus of eq. (9) uses the C library's ``exp``.
-From the same state a step gives the same flags, captures, crashes and resets on both paths;
-trajectories drift apart by rounding over many steps. The transcendental functions that steer
-the vehicles (the attitude setpoint's ``atan``, the initial ``cos`` and ``sin``, the
-disturbance's angle) and the network evader stay in torch.
+vectorised one sometimes is not, and the attitude setpoint's ``atan`` and the softplus of
+eq. (9) use the C library's. From the same state a step gives the same flags, captures,
+crashes and resets on both paths; trajectories drift apart by rounding over many steps. The
+disturbance (counter-based random numbers) and the network evader stay in torch.
 
 The kernels are in :mod:`pes.sim._numba_substeps` and :mod:`pes.sim._numba_step`, imported on
 first use only (so that ``import pes`` does not import Numba); Numba compiles them then (a few
@@ -73,6 +72,12 @@ def _load():
             rays = np.ones((1, 5), np.float32)
             consts = np.ones(12, np.float32)
             _numba_step.flee(vehicles, alive, rays, boxes, boxes[:, :2], *[f32(1)] * 3, consts)
+            actions = np.zeros((1, 1, 2), np.float32)
+            params, none = np.ones((5, 2), np.float32), np.zeros((0, 0), np.float32)
+            axes = np.zeros(1, np.float32)
+            _numba_step.move(
+                vehicles, actions, axes, axes, alive, none, none, params, row, consts[:6], 1
+            )
             counters = np.ones((7, 1), np.int64)
             history = np.zeros((1, 2, 2, 4), np.float32)
             ints, consts = np.ones(5, np.int64), np.ones(20, np.float32)
@@ -149,7 +154,14 @@ def _constants(sc) -> dict:
     centre_x, centre_y = (boxes[:, 0] + boxes[:, 2]) * 0.5, (boxes[:, 1] + boxes[:, 3]) * 0.5
     half_x, half_y = (boxes[:, 2] - boxes[:, 0]) * 0.5, (boxes[:, 3] - boxes[:, 1]) * 0.5
     lead = cfg.intercept_lead
+    p = sc.params
+    dynamics = [p.max_accel, p.mass]
+    dynamics += [(p.iyy - p.izz) / p.ixx, (p.izz - p.ixx) / p.iyy, (p.ixx - p.iyy) / p.izz]
+    step = [cfg.dt / cfg.physics_substeps, p.setpoint_weight, p.kp, p.ki, p.kd, p.max_tilt]
     consts = {
+        "vehicle_params": torch.stack(dynamics).contiguous().numpy(),
+        "dynamics": np.array(step, np.float32),
+        "no_force": np.zeros((0, 0), np.float32),
         "boxes": torch.stack([centre_x, centre_y, half_x, half_y], -1).contiguous().numpy(),
         "other": sc.other_index.contiguous().numpy(),
         "width": f32(sc.arena[0].item()),
@@ -215,6 +227,38 @@ def observe(sc, vehicles: Tensor, alive: Tensor) -> dict[str, Tensor]:
         "state": torch.from_numpy(state),
         "evader_obs": torch.from_numpy(evader_obs),
     }
+
+
+def move_quadrotors(
+    sc,
+    vehicles: Tensor,
+    actions: Tensor,
+    evader_ax: Tensor,
+    evader_ay: Tensor,
+    alive0: Tensor,
+    force: tuple[Tensor, Tensor] | None,
+) -> Tensor:
+    """The quadrotors' commands and physics sub-steps of :func:`pes.sim.scenario.advance` by
+    one kernel call: ``vehicles`` (16, E, A), ``actions`` (E, N, 2) in [-1, 1], the evader's
+    action ``evader_ax``, ``evader_ay`` (E,), ``alive0`` (E, N), ``force`` the disturbance
+    (fx, fy) (E, A) in newtons or None. Returns the first 13 fields after the step,
+    (13, E, A)."""
+    k = _constants(sc)
+    fx, fy = (k["no_force"], k["no_force"]) if force is None else (f.numpy() for f in force)
+    moved = _step.move(
+        vehicles.contiguous().numpy(),
+        actions.contiguous().numpy(),
+        evader_ax.contiguous().numpy(),
+        evader_ay.contiguous().numpy(),
+        alive0.contiguous().numpy(),
+        fx,
+        fy,
+        k["vehicle_params"],
+        sc.params.max_speed.numpy(),
+        k["dynamics"],
+        sc.config.physics_substeps,
+    )
+    return torch.from_numpy(moved)
 
 
 def flee(evader, vehicles: Tensor, alive: Tensor) -> tuple[Tensor, Tensor]:

@@ -492,6 +492,11 @@ def advance(
         eax, eay = sc.evader_policy(v, c, f)
     else:
         eax, eay = evader_action[:, 0], evader_action[:, 1]
+    fast = sc.roadmap is None and kernels.available(v.x)  # compiled (pes.sim.kernels)
+    if fast and cfg.dynamics == "quadrotor":
+        force = _disturbance(sc, c) if cfg.disturbance else None
+        moved = kernels.move_quadrotors(sc, state["vehicles"], actions, eax, eay, alive0, force)
+        return kernels.collide(sc, state, moved)
     ax = torch.cat([actions[..., 0] * alive0, eax[:, None]], dim=1)  # (E, A); dead ones idle
     ay = torch.cat([actions[..., 1] * alive0, eay[:, None]], dim=1)
     ax, ay = clip_norm(ax * p.max_accel, ay * p.max_accel, p.max_accel)
@@ -504,7 +509,7 @@ def advance(
 
     dynamics = quadrotor_step if cfg.dynamics == "quadrotor" else point_mass_step
     moved = dynamics(v, ax, ay, fx, fy, p, cfg.dt, cfg.physics_substeps)
-    if sc.roadmap is None and kernels.available(v.x):  # the rest, compiled (pes.sim.kernels)
+    if fast:  # the rest, compiled
         return kernels.collide(sc, state, torch.stack(moved[:13]))
     # Dead pursuers stay where they fell, at rest.
     moved = Vehicles(
