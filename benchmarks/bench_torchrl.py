@@ -1,19 +1,22 @@
 """Throughput of PES through TorchRL, beside the bare simulator and VMAS through TorchRL.
 
     python benchmarks/bench_torchrl.py   # CPU: writes benchmarks/results/torchrl_cpu.json
+    python benchmarks/bench_torchrl.py --sim-compile \
+        --out benchmarks/results/torchrl_cpu_compiled.json
     python benchmarks/bench_torchrl.py --device cuda --sizes 4096 65536 \
         --out benchmarks/results/torchrl_cuda.json
 
 What is measured (frames per second; one frame = one control step of one game, TorchRL's
 count of frames in a batch):
 
-* ``pes_torchrl``: :class:`pes.torchrl.PESTorchRLEnv` with the simulator fused by
-  ``torch.compile`` (``sim_compile=True``), stepped with ``env.step_and_maybe_reset`` as a
-  TorchRL collector does, random actions drawn beforehand. Default scenario: 5 pursuers, flee
+* ``pes_torchrl``: :class:`pes.torchrl.PESTorchRLEnv` as a user gets it (the simulator's step
+  in the compiled CPU kernels of ``pes.sim.kernels``; with ``--sim-compile``, fused by
+  ``torch.compile`` instead), stepped with ``env.step_and_maybe_reset`` as a TorchRL collector
+  does, random actions drawn beforehand. Default scenario: 5 pursuers, flee
   evader, quadrotor dynamics with 10 sub-steps. Episodes desynchronised (each game starts at a
   random step of its episode) so that resets happen at their steady rate.
-* ``pes_sim``: the same simulator without TorchRL (:func:`pes.make_env`, compiled), for the
-  adapter's overhead (``torchrl_over_sim``).
+* ``pes_sim``: the same simulator without TorchRL (:func:`pes.make_env`, the same
+  ``compile``), for the adapter's overhead (``torchrl_over_sim``).
 * ``vmas_torchrl``: VMAS ``simple_tag`` (5 chasers, 1 runner, 8 landmarks, continuous actions)
   through TorchRL's ``VmasEnv``, stepped the same way, and ``vmas``, the same without TorchRL.
   Optional (``pip install vmas``).
@@ -47,10 +50,12 @@ from pes.torchrl import GROUP, PESTorchRLEnv  # noqa: E402
 ROUNDS = 5
 
 
-def pes_torchrl_timer(config: pes.EnvConfig, num_envs: int, device: str) -> tuple[Timer, dict]:
+def pes_torchrl_timer(
+    config: pes.EnvConfig, num_envs: int, device: str, compile: bool
+) -> tuple[Timer, dict]:
     """A warmed-up :class:`Timer` of ``step_and_maybe_reset`` on :class:`PESTorchRLEnv`."""
     start = time.perf_counter()
-    env = PESTorchRLEnv(config, num_envs, device, seed=0, sim_compile=True, check_actions=False)
+    env = PESTorchRLEnv(config, num_envs, device, seed=0, sim_compile=compile, check_actions=False)
     td = env.reset()
     generator = torch.Generator().manual_seed(0)
     start_step = torch.randint(0, config.max_steps, (num_envs,), generator=generator)
@@ -124,6 +129,9 @@ def main() -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024, 4096])
     parser.add_argument("--steps", type=int, default=200, help="timed steps per simulator")
     parser.add_argument("--skip-vmas", action="store_true")
+    parser.add_argument(
+        "--sim-compile", action="store_true", help="the simulator fused by torch.compile"
+    )
     parser.add_argument("--out", default="benchmarks/results/torchrl_cpu.json")
     args = parser.parse_args()
 
@@ -138,7 +146,9 @@ def main() -> int:
         "machine": machine_info(args.device),
         "versions": {p: _version(p) for p in ("torch", "torchrl", "tensordict", "vmas")},
         "scenario": "PES: default EnvConfig (5 pursuers with random actions, flee evader, "
-        "quadrotor dynamics with 10 sub-steps, 8 buildings), simulator compiled; VMAS: "
+        "quadrotor dynamics with 10 sub-steps, 8 buildings), simulator "
+        + ("fused by torch.compile" if args.sim_compile else "in its CPU kernels (the default)")
+        + "; VMAS: "
         "simple_tag with 5 chasers, 1 runner, 8 landmarks, continuous random actions",
         "sizes": [],
     }
@@ -146,9 +156,11 @@ def main() -> int:
         row: dict = {"num_envs": size}
         timers: dict[str, Timer] = {}
         timers["pes_torchrl"], row["pes_torchrl_setup"] = pes_torchrl_timer(
-            config, size, args.device
+            config, size, args.device, args.sim_compile
         )
-        timers["pes_sim"], row["pes_sim_setup"] = pes_timer(config, size, args.device)
+        timers["pes_sim"], row["pes_sim_setup"] = pes_timer(
+            config, size, args.device, compile=args.sim_compile
+        )
         if not args.skip_vmas:
             try:
                 timers["vmas_torchrl"] = vmas_torchrl_timer(size, args.device)

@@ -49,8 +49,16 @@ def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
         ),
         EnvConfig(intercept_lead=1.0, encirclement_weight=0.5, evader_policy="random"),
         EnvConfig(dynamics="point_mass", num_pursuers=3, capture_count=2),
+        EnvConfig(distance_metric="geodesic"),  # torch around the sub-step kernel alone
     ],
-    ids=["flee-resets", "disturbance-ddpg-damaged", "pes-reward-disable", "lead-encircle", "point"],
+    ids=[
+        "flee-resets",
+        "disturbance-ddpg-damaged",
+        "pes-reward-disable",
+        "lead-encircle",
+        "point",
+        "geodesic",
+    ],
 )
 def test_kernels_step_as_torch(config, torch_loop):
     """From the same states and actions the two paths give the same flags, counters and

@@ -31,8 +31,7 @@ import torch
 from torch import Tensor
 
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
-_kernel = None  # the compiled sub-step loop, once loaded
-_step = None  # the module of the other kernels, once loaded
+_step = None  # the module of the step's kernels, once loaded
 _failed = False  # numba is missing or failed: use the torch code
 
 
@@ -51,32 +50,29 @@ def available(t: Tensor) -> bool:
 
 
 def _load():
-    """The compiled sub-step kernel, the other kernels with it (compiled or read from Numba's
-    cache on first call), or None."""
-    global _kernel, _step, _failed
-    if _kernel is None and not _failed:
+    """The module of the step's kernels, compiled (or read from Numba's cache) on first call,
+    or None. The sub-step kernel alone (:func:`quadrotor_substeps`, for the physics outside
+    a full step) compiles on its own first call."""
+    global _step, _failed
+    if _step is None and not _failed:
         try:
             from pes.sim import _numba_step
-            from pes.sim._numba_substeps import substeps
 
             # Compile (or load from the cache) now, for the argument types of every call, so
             # that a Numba that cannot compile means the torch code, not an error mid-step.
-            f32, grid, row = np.float32, np.zeros((1, 1), np.float32), np.ones(1, np.float32)
-            cube = np.zeros((13, 1, 1), np.float32)
-            trig = np.ones((6, 1, 1), np.float32)
-            substeps(cube, trig, grid, grid, grid, grid, cube[:3, 0], row, *[f32(0.1)] * 5, 1)
-            vehicles = np.ones((16, 1, 2), np.float32)
+            f32 = np.float32
+            vehicles, cube = np.ones((16, 1, 2), np.float32), np.zeros((13, 1, 2), np.float32)
             alive = np.ones((1, 1), np.bool_)
             boxes = np.ones((1, 4), np.float32)
             _numba_step.observe(vehicles, alive, np.zeros((1, 1), np.int64), *[f32(1)] * 4)
             rays = np.ones((1, 5), np.float32)
             consts = np.ones(12, np.float32)
             _numba_step.flee(vehicles, alive, rays, boxes, boxes[:, :2], *[f32(1)] * 3, consts)
-            actions = np.zeros((1, 1, 2), np.float32)
+            actions, axes = np.zeros((1, 1, 2), np.float32), np.zeros(1, np.float32)
             params, none = np.ones((5, 2), np.float32), np.zeros((0, 0), np.float32)
-            axes = np.zeros(1, np.float32)
+            speeds = np.ones(2, np.float32)
             _numba_step.move(
-                vehicles, actions, axes, axes, alive, none, none, params, row, consts[:6], 1
+                vehicles, actions, axes, axes, alive, none, none, params, speeds, consts[:6], 1
             )
             counters = np.ones((7, 1), np.int64)
             history = np.zeros((1, 2, 2, 4), np.float32)
@@ -84,10 +80,10 @@ def _load():
             _numba_step.collide(
                 vehicles, cube, alive, alive, counters, history, boxes, ints, consts
             )
-            _kernel, _step = substeps, _numba_step
+            _step = _numba_step
         except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch code
             _failed = True
-    return _kernel
+    return _step
 
 
 def quadrotor_substeps(
@@ -120,7 +116,8 @@ def quadrotor_substeps(
     Returns:
         (13, E, A) float32, the state after ``substeps`` sub-steps.
     """
-    kernel = _load()
+    from pes.sim._numba_substeps import substeps as kernel
+
     f32 = np.float32
     trig = torch.cat([torch.cos(state[4:7]), torch.sin(state[4:7])])
     out = kernel(
