@@ -596,6 +596,21 @@ def test_an_interrupt_stops_the_run_with_its_files_written(sig, tmp_path):
     assert done.returncode == 0
 
 
+def test_env_steps_stop_a_run_at_its_experience_budget_and_resume_with_it(tmp_path):
+    """``env_steps`` stops a run at the first step that reaches it (steps of ``num_envs``
+    environments at once), on every machine alike, and a resumed run at a larger one."""
+    values = {"episodes": 10**6, "env_steps": 300, "threads": 1, "eval_episodes": 0}
+    cfg = build_train_config("ppo", "tiny", values)
+    summary = train(cfg, tmp_path / "run", progress=False)
+    step = cfg.num_envs
+    assert summary["stopped_by"] == "env_steps"
+    assert 300 <= summary["env_steps"] < 300 + step
+    longer = build_train_config("ppo", "tiny", dict(values, env_steps=700))
+    resumed = train(longer, tmp_path / "run", resume=True, progress=False)
+    assert resumed["stopped_by"] == "env_steps"
+    assert 700 <= resumed["env_steps"] < 700 + step
+
+
 def test_cpu_limit_stops_a_run_by_its_cpu_time_and_resumes_with_it(tmp_path):
     """``cpu_limit`` counts the process's CPU time (what a run shares with nothing else), is
     kept by the checkpoint and stops the resumed run at the same total."""

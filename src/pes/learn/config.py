@@ -123,7 +123,11 @@ class TrainConfig:
     cpu_limit: float = 0.0
     """Stop after this many minutes of this process's CPU time (all its threads; 0 = no
     limit): unlike ``time_limit``, the same work whatever else shares the machine's cores
-    (``pes tune``'s trial budget)."""
+    (``pes tune``'s trial budget), though not on another CPU (docs/training.md)."""
+    env_steps: int = 0
+    """Stop after this many environment steps (one control step of one environment; 0 = no
+    limit): a budget of experience that is the same on every machine, unlike the time limits
+    (a checkpoint is written)."""
     num_envs: int = 1
     """Environments collected from at once."""
     init_from: str = ""
@@ -148,7 +152,8 @@ class TrainConfig:
         for name in ("episodes", "num_envs", "log_every"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
-        for name in ("time_limit", "cpu_limit", "checkpoint_every", "eval_episodes", "threads"):
+        limits = ("time_limit", "cpu_limit", "env_steps")
+        for name in (*limits, "checkpoint_every", "eval_episodes", "threads"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
         if self.device not in ("cpu", "cuda"):

@@ -101,6 +101,7 @@ RESUMABLE_CHANGES = {
     "episodes",
     "time_limit",
     "cpu_limit",
+    "env_steps",
     "checkpoint_every",
     "eval_episodes",
     "device",
@@ -365,7 +366,7 @@ def train(
         # tqdm's own estimate counts episodes only: "left" below also knows the time limit.
         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} ep [{elapsed}{postfix}]",
     )
-    first_episode = prog.episodes
+    first_episode, first_steps = prog.episodes, prog.env_steps
     row: dict[str, float] | None = None  # the latest log row
     shown = -math.inf  # when the bar's figures were last refreshed
 
@@ -390,6 +391,9 @@ def train(
         left = min(deadline - prog.wall_s, cpu_deadline - prog.cpu_s)
         if done_here > 0:
             left = min(left, (cfg.episodes - prog.episodes) * run_s / done_here)
+        steps_here = prog.env_steps - first_steps
+        if cfg.env_steps and steps_here > 0:
+            left = min(left, (cfg.env_steps - prog.env_steps) * run_s / steps_here)
         shown_figures = {
             "success": f"{figures['success']:.2f}",
             "steps": f"{figures['steps']:.0f}",
@@ -514,6 +518,9 @@ def train(
                     break
                 if prog.cpu_s >= cpu_deadline:
                     stopped_by = "cpu_limit"
+                    break
+                if cfg.env_steps and prog.env_steps >= cfg.env_steps:
+                    stopped_by = "env_steps"
                     break
                 if signals.requested:
                     stopped_by = "interrupted"
