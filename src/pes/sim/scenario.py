@@ -19,7 +19,9 @@ history     (E, n, A, 4)       the last n frames of [position, velocity], normal
 :func:`step_core` is the environment step -- evader policy, dynamics, collisions, damage,
 capture, rewards and observations -- and :func:`reset_pass` the auto-reset of finished
 environments; both have static shapes and no Python loop over environments, vehicles or
-buildings, so that ``torch.compile`` fuses each into one graph.
+buildings, so that ``torch.compile`` fuses each into one graph. On the CPU, when torch is not
+compiling, most of both runs in the compiled kernels of :mod:`pes.sim.kernels` instead, which
+repeat this code's arithmetic (the same numbers to float32 rounding).
 """
 
 from __future__ import annotations
