@@ -151,6 +151,18 @@ def test_user_mistakes(tmp_path, capsys):
     assert "unknown method 'nope'" in capsys.readouterr().err
 
 
+def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure():
+    """Without captures, the swarm lost to crashes in few steps does not outrank the one that
+    kept up with the evader to the step limit; captures always come first."""
+    from pes.experiments.tune import score
+
+    lost_fast = {"success_rate": 0.0, "mean_steps": 163.0, "mean_reward": -0.9}
+    kept_up = {"success_rate": 0.0, "mean_steps": 484.0, "mean_reward": -0.3}
+    one_capture = {"success_rate": 0.005, "mean_steps": 480.0, "mean_reward": -5.0}
+    assert score(kept_up) > score(lost_fast)
+    assert score(one_capture) > score(kept_up)
+
+
 def test_tune_scores_every_trial_resumes_and_refuses_other_settings(tmp_path):
     """pes tune's machinery on the tiny preset: trial t00 is the preset, the others sampled
     settings; the report lists both; a second call finds them done; other minutes are refused."""

@@ -9,7 +9,7 @@ the quick preset with its settings under the chosen protocol for ``minutes`` min
 on one torch thread (the run key ``cpu_limit``: the same work whatever else shares the
 machine), then is scored on ``eval_episodes`` held-out evaluation episodes (the
 paper's protocol: disturbance on, crashes disable, the default evader; seeds never used in
-training or in ``pes reproduce``): success rate first, fewer steps second. Every learner gets
+training or in ``pes reproduce``): success rate first, mean reward second. Every learner gets
 the same budget: the same trial count, minutes and evaluation.
 
 Each trial runs in ``OUT/trials/<id>/`` (its training run in ``run/``, its score in
@@ -152,8 +152,10 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
 
 
 def score(result: dict[str, Any]) -> float:
-    """A trial's score (higher is better): success rate, then fewer steps."""
-    return result["success_rate"] - 1e-5 * result["mean_steps"]
+    """A trial's score (higher is better): success rate, then the evaluation's mean reward (the
+    paper's reward: nearer the evader, fewer crashes, sooner captures). Not fewer steps: where no
+    trial captures, the fewest steps are those of swarms lost to crashes soonest."""
+    return result["success_rate"] + 1e-5 * result["mean_reward"]
 
 
 def tune(
@@ -200,7 +202,9 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
     for spec in specs:
         path = out / "trials" / spec["id"] / "result.json"
         if path.is_file():
-            results.append(json.loads(path.read_text()))
+            record = json.loads(path.read_text())
+            record["score"] = score(record["eval"])  # today's score of trials scored before
+            results.append(record)
     results.sort(key=lambda r: r["score"], reverse=True)
     first = specs[0]
     summary = {
