@@ -121,14 +121,14 @@ def quadrotor_substeps(
     f32 = np.float32
     trig = torch.cat([torch.cos(state[4:7]), torch.sin(state[4:7])])
     out = kernel(
-        state.contiguous().numpy(),
+        _numpy(state),
         trig.numpy(),
-        roll_ref.contiguous().numpy(),
-        pitch_ref.contiguous().numpy(),
-        fx.contiguous().numpy(),
-        fy.contiguous().numpy(),
-        gyro.contiguous().numpy(),
-        max_speed.contiguous().numpy(),
+        _numpy(roll_ref),
+        _numpy(pitch_ref),
+        _numpy(fx),
+        _numpy(fy),
+        _numpy(gyro),
+        _numpy(max_speed),
         f32(h),
         f32(b),
         f32(kp),
@@ -137,6 +137,26 @@ def quadrotor_substeps(
         int(substeps),
     )
     return torch.from_numpy(out)
+
+
+COLLIDE_OUTPUTS = (
+    "reward",
+    "evader_reward",
+    "terminated",
+    "truncated",
+    "success",
+    "crashed",
+    "evader_contact",
+    "distances",
+    "positions",
+    "velocities",
+)
+"""The outputs of :func:`pes.sim._numba_step.collide` after the state, in its order."""
+
+
+def _numpy(t: Tensor) -> np.ndarray:
+    """A CPU tensor as a C-contiguous NumPy array, without a copy where it already is one."""
+    return t.contiguous().numpy()
 
 
 def _constants(sc) -> dict:
@@ -210,8 +230,8 @@ def observe(sc, vehicles: Tensor, alive: Tensor) -> dict[str, Tensor]:
     (E, N): the same dict of views, computed by one kernel call."""
     k = _constants(sc)
     obs, mask, state, evader_obs = _step.observe(
-        vehicles.contiguous().numpy(),
-        alive.contiguous().numpy(),
+        _numpy(vehicles),
+        _numpy(alive),
         k["other"],
         k["width"],
         k["height"],
@@ -243,11 +263,11 @@ def move_quadrotors(
     k = _constants(sc)
     fx, fy = (k["no_force"], k["no_force"]) if force is None else (f.numpy() for f in force)
     moved = _step.move(
-        vehicles.contiguous().numpy(),
-        actions.contiguous().numpy(),
-        evader_ax.contiguous().numpy(),
-        evader_ay.contiguous().numpy(),
-        alive0.contiguous().numpy(),
+        _numpy(vehicles),
+        _numpy(actions),
+        _numpy(evader_ax),
+        _numpy(evader_ay),
+        _numpy(alive0),
         fx,
         fy,
         k["vehicle_params"],
@@ -302,8 +322,8 @@ def flee(evader, vehicles: Tensor, alive: Tensor) -> tuple[Tensor, Tensor]:
         }
         evader.kernel_constants = k
     ax, ay = _step.flee(
-        vehicles.contiguous().numpy(),
-        alive.contiguous().numpy(),
+        _numpy(vehicles),
+        _numpy(alive),
         k["rays"],
         k["grown"],
         k["centre"],
@@ -323,52 +343,20 @@ def collide(
     fields. Returns ``advance``'s stepped state and outputs."""
     k = _constants(sc)
     flags = state["flags"]
-    (
-        vehicles,
-        counters,
-        alive,
-        history,
-        reward,
-        evader_reward,
-        terminated,
-        truncated,
-        success,
-        crashed,
-        evader_contact,
-        distances,
-        positions,
-        velocities,
-    ) = _step.collide(
-        state["vehicles"].contiguous().numpy(),
-        moved.contiguous().numpy(),
-        flags[0].contiguous().numpy(),
-        flags[1].contiguous().numpy(),
-        state["counters"].contiguous().numpy(),
-        state["history"].contiguous().numpy(),
+    arrays = _step.collide(
+        *(_numpy(t) for t in (state["vehicles"], moved, flags[0], flags[1])),
+        *(_numpy(state[key]) for key in ("counters", "history")),
         k["boxes"],
         k["ints"],
         k["floats"],
     )
-    counters_t, alive_t = torch.from_numpy(counters), torch.from_numpy(alive)
+    vehicles, counters, alive, history, *rest = (torch.from_numpy(a) for a in arrays)
     stepped = {
-        "vehicles": torch.from_numpy(vehicles),
-        "counters": counters_t,
-        "flags": torch.stack([alive_t, flags[1]]),
-        "history": torch.from_numpy(history),
+        "vehicles": vehicles,
+        "counters": counters,
+        "flags": torch.stack([alive, flags[1]]),
+        "history": history,
     }
-    out = {
-        "steps": counters_t[3].clone(),
-        "crashes": counters_t[5].clone(),
-        "alive": alive_t,
-        "reward": torch.from_numpy(reward),
-        "evader_reward": torch.from_numpy(evader_reward),
-        "terminated": torch.from_numpy(terminated),
-        "truncated": torch.from_numpy(truncated),
-        "success": torch.from_numpy(success),
-        "crashed": torch.from_numpy(crashed),
-        "evader_contact": torch.from_numpy(evader_contact),
-        "distances": torch.from_numpy(distances),
-        "positions": torch.from_numpy(positions),
-        "velocities": torch.from_numpy(velocities),
-    }
+    out = {"steps": counters[3].clone(), "crashes": counters[5].clone(), "alive": alive}
+    out.update(zip(COLLIDE_OUTPUTS, rest))
     return stepped, out
