@@ -155,12 +155,15 @@ def test_every_table4_learner_trains_under_both_protocols(algo, protocol, tmp_pa
 
 def test_the_quick_presets_of_table4_share_one_protocol_and_one_run():
     """Table IV compares methods: every learner's quick preset trains under the same protocol,
-    against the same opponent, with the same environments and minutes."""
+    against the same opponent, on the same budget of experience (env steps, which no episode,
+    time or CPU limit cuts short)."""
     configs = [build_train_config(algo, "quick") for algo in TABLE4_ALGOS]
     for cfg in configs:
         assert cfg.protocol == PES and cfg.protocol.name == "pes"
-        assert cfg.env == configs[0].env and cfg.time_limit == configs[0].time_limit
-        assert cfg.env_config() == configs[0].env_config()
+        assert cfg.env == configs[0].env and cfg.env_config() == configs[0].env_config()
+        assert cfg.env_steps == configs[0].env_steps > 0
+        assert cfg.time_limit == cfg.cpu_limit == 0.0
+        assert cfg.episodes * cfg.env_config().max_steps >= cfg.env_steps
 
 
 def test_a_key_the_method_does_not_read_is_an_error_naming_the_method():

@@ -117,14 +117,15 @@ def test_table6_with_ray(tmp_path):
 
 
 def test_budget_training_configs():
-    """quick trains each method on a fifth of its quick preset's episodes, no wall-clock limit;
+    """quick trains each method on its whole quick preset (its env steps, no time limit);
     paper keeps the paper preset's episodes; every trial gets its seed."""
     from pes.algos import build_train_config
 
     for algo in ("cbc-tp", "ppo", "maac"):
         preset = build_train_config(algo, "quick")
         cfg = train_config({"algo": algo, "seed": 2}, BUDGETS["quick"])
-        assert cfg.episodes == round(preset.episodes / 5) and cfg.time_limit == 0.0
+        assert cfg.env_steps == preset.env_steps == 2_000_000
+        assert cfg.episodes == preset.episodes and cfg.time_limit == 0.0
         assert cfg.seed == 2 and cfg.preset == "quick" and cfg.eval_episodes == 0
     cfg = train_config({"algo": "cbc-tp", "seed": 0}, BUDGETS["paper"])
     assert cfg.episodes == build_train_config("cbc-tp", "paper").episodes == 4000
@@ -163,15 +164,31 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure():
     assert score(one_capture) > score(kept_up)
 
 
-def test_tune_scores_every_trial_resumes_and_refuses_other_settings(tmp_path):
-    """pes tune's machinery on the tiny preset: trial t00 is the preset, the others sampled
-    settings; the report lists both; a second call finds them done; other minutes are refused."""
+def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path):
+    """pes tune's successive halving on the tiny preset: every trial is scored at half the
+    budget, the better two of three go on (resuming their own runs) to the whole budget; trial
+    t00 is the preset, the others sampled settings; a second call finds everything done; another
+    budget is refused; --report-only reports what is scored and runs nothing."""
     from pes.errors import ConfigError
-    from pes.experiments.tune import tune
+    from pes.experiments.tune import score, tune
 
-    kwargs = dict(trials=2, minutes=0.02, eval_episodes=2, preset="tiny", use_ray=False)
+    kwargs = dict(
+        trials=3, env_steps=800, halvings=1, eval_episodes=2, preset="tiny", use_ray=False
+    )
     summary = tune("ppo", out=tmp_path, progress=False, **kwargs)
-    assert summary["finished"] == 2 and len(summary["results"]) == 2
+    assert summary["budgets"] == [400, 800] and summary["complete"]
+    assert summary["scored"] == 3
+    reached = {r["id"]: r["env_steps"] for r in summary["results"]}
+    assert sorted(reached.values()) == [400, 800, 800]
+    losers = [i for i, s in reached.items() if s == 400]
+    halves = {r["id"]: r["by_budget"]["400"] for r in summary["results"]}
+    assert score(halves[losers[0]]) == min(score(h) for h in halves.values())
+    for trial, steps in reached.items():
+        folder = tmp_path / "trials" / trial
+        assert (folder / "result-400.json").is_file()
+        assert (folder / "result-800.json").is_file() == (steps == 800)
+        trained = json.loads((folder / "run" / "summary.json").read_text())["env_steps"]
+        assert steps <= trained < steps + 8 * 64  # one run, resumed, not started again
     values = {r["id"]: r["values"] for r in summary["results"]}
     assert values["t00"] == {} and set(values["t01"]) == {
         "lr_actor",
@@ -179,13 +196,16 @@ def test_tune_scores_every_trial_resumes_and_refuses_other_settings(tmp_path):
         "ent_coef",
         "hidden",
     }
+    assert summary["best"] == summary["results"][0]["values"]
     assert "t01" in (tmp_path / "README.md").read_text()
     again = tune("ppo", out=tmp_path, progress=False, **kwargs)
     assert again["results"] == summary["results"]
     with pytest.raises(ConfigError, match="other settings"):
-        tune("ppo", out=tmp_path, progress=False, **dict(kwargs, minutes=0.05))
+        tune("ppo", out=tmp_path, progress=False, **dict(kwargs, env_steps=1600))
     # --report-only: a longer search reports the scored trials and runs none.
-    partial = tune("ppo", out=tmp_path, progress=False, report_only=True, **dict(kwargs, trials=3))
-    assert partial["finished"] == 2 and partial["trials"] == 3
-    assert not (tmp_path / "trials" / "t02").exists()
-    assert "2 of 3 trials finished" in (tmp_path / "README.md").read_text()
+    partial = tune("ppo", out=tmp_path, progress=False, report_only=True, **dict(kwargs, trials=4))
+    assert partial["scored"] == 3 and partial["trials"] == 4 and not partial["complete"]
+    assert partial["best"] is None
+    assert not (tmp_path / "trials" / "t03").exists()
+    report = (tmp_path / "README.md").read_text()
+    assert "3 of 4 trials scored; the search is not finished" in report

@@ -484,13 +484,16 @@ def cmd_tune(args: argparse.Namespace) -> int:
     out = args.out or f"results/tuning/{args.algo}"
     _say(
         args,
-        f"tuning {args.algo} ({args.protocol} protocol): {args.trials} trials of "
-        f"{args.minutes:g} minutes into {out}",
+        f"tuning {args.algo} ({args.protocol} protocol): {args.trials} trials, "
+        f"{args.halvings} halvings, up to "
+        + (f"{args.env_steps:,} env steps" if args.env_steps else "the preset's env steps")
+        + f" into {out}",
     )
     summary = tune(
         args.algo,
         trials=args.trials,
-        minutes=args.minutes,
+        env_steps=args.env_steps,
+        halvings=args.halvings,
         eval_episodes=args.eval_episodes,
         protocol=args.protocol,
         seed=args.seed,
@@ -508,13 +511,15 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(summary)
     else:
-        best = summary["results"][0] if summary["results"] else None
+        lead = summary["results"][0] if summary["results"] else None
         print(
-            f"{summary['finished']} of {summary['trials']} trials finished; best: "
+            f"{summary['scored']} of {summary['trials']} trials scored; "
+            + ("best: " if summary["complete"] else "leading so far: ")
             + (
-                f"{best['id']} {best['values'] or '(quick preset)'}: "
-                f"{100 * best['success_rate']:.1f} % in {best['mean_steps']:.0f} steps"
-                if best
+                f"{lead['id']} {lead['values'] or '(quick preset)'}: "
+                f"{100 * lead['success_rate']:.1f} % in {lead['mean_steps']:.0f} steps "
+                f"after {lead['env_steps']:,} env steps"
+                if lead
                 else "none yet"
             )
             + f"; report: {out}/README.md"
@@ -791,9 +796,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="the same hyper-parameter search for any learner",
         description="Random search over the learner's key settings (its TUNE_SPACE: learning "
         "rates, exploration or entropy, batch size, network width): each trial trains the "
-        "quick preset with its settings for --minutes minutes of CPU time on one thread (the "
-        "same work whatever else runs) under --protocol and is scored on --eval-episodes "
-        "held-out episodes; trial t00 is the preset itself. "
+        "quick preset with its settings under --protocol on one thread, with a budget of env "
+        "steps (the same work on any machine), spent by successive halving: every trial to "
+        "--env-steps / 2^--halvings, the better half on to twice that, and so on to "
+        "--env-steps; each score is on the same --eval-episodes held-out episodes; trial t00 "
+        "is the preset itself. "
         "Trials run under Ray when it is installed, else one after the other; re-running "
         "resumes. Writes OUT/tuning.json and OUT/README.md (see docs/reproduce.md).",
     )
@@ -801,11 +808,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--protocol", choices=["pes", "paper"], default="pes", help="training protocol")
     p.add_argument("--trials", type=_positive, default=8, help="trials (default: 8)")
     p.add_argument(
-        "--minutes",
-        type=_positive_float,
-        default=30.0,
-        help="training minutes of CPU time per trial (default: 30; under the pes protocol a "
-        "trial must outlast its 100,000 demonstration transitions)",
+        "--env-steps",
+        type=_positive,
+        default=0,
+        metavar="N",
+        help="env steps of the trials that train longest (default: the quick preset's budget, "
+        "2,000,000)",
+    )
+    p.add_argument(
+        "--halvings",
+        type=_non_negative,
+        default=2,
+        metavar="K",
+        help="rounds of successive halving before the full budget (default: 2, so 8 trials: 8 "
+        "to a quarter of --env-steps, 4 to a half, 2 to all of it; 0: every trial to all)",
     )
     p.add_argument(
         "--eval-episodes",

@@ -48,7 +48,6 @@ BICNET_PRESETS: dict[str, dict[str, Any]] = {
     # CBC Net's quick learner (its LSTMs cost about as much per update)
     "quick": dict(
         QUICK_RUN,
-        episodes=2000,
         hidden=64,
         mlp_hidden=64,
         lr_actor=5e-4,

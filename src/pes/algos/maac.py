@@ -106,7 +106,6 @@ MAAC_PRESETS: dict[str, dict[str, Any]] = {
     # two attention critics, the actors and alpha costs ~70 ms on one CPU thread.
     "quick": dict(
         QUICK_RUN,
-        episodes=1800,
         hidden=64,
         lr_actor=5e-4,
         lr_critic=1e-3,

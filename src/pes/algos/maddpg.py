@@ -56,7 +56,6 @@ MADDPG_PRESETS: dict[str, dict[str, Any]] = {
     # CBC Net's quick learner with MLPs, twice as many updates (an MLP update is cheap)
     "quick": dict(
         QUICK_RUN,
-        episodes=3000,
         mlp_hidden=64,
         lr_actor=5e-4,
         lr_critic=1e-3,

@@ -111,7 +111,6 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
     # one CPU thread, about as long as the rollout's collection.
     "quick": dict(
         QUICK_RUN,
-        episodes=7000,
         num_envs=64,
         lr_actor=3e-4,
         lr_critic=1e-3,

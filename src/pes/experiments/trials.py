@@ -140,15 +140,11 @@ def _run_policy_trial(spec: dict, budget: Budget, folder: Path, threads: int) ->
 
 def train_config(spec: dict, budget: Budget, threads: int = 0):
     """The :class:`pes.learn.config.TrainConfig` of a ``train`` trial: the method's preset of
-    the budget's name, the budget's overrides and share of the preset's episodes, the seed."""
+    the budget's name, the budget's overrides, the seed."""
     values = {**budget.train, "seed": spec["seed"], "eval_episodes": 0, "threads": threads}
     values["env"] = dict(budget.train.get("env", {}))
     protocol = spec.get("protocol")
-    cfg = build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
-    if budget.episode_fraction != 1.0:
-        values["episodes"] = max(1, round(cfg.episodes * budget.episode_fraction))
-        cfg = build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
-    return cfg
+    return build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
 
 
 def _train(spec: dict, budget: Budget, folder: Path, threads: int) -> dict:

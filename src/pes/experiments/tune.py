@@ -1,20 +1,28 @@
 """``pes tune``: the same hyper-parameter search for any learner (SPEC §3, "fair comparison").
 
-    pes tune --algo maddpg --trials 8 --minutes 30 --out results/tuning/maddpg
+    pes tune --algo maddpg --trials 8 --out results/tuning/maddpg
 
 A search samples ``trials`` settings of the learner's :attr:`~pes.learn.learner.Learner.
 TUNE_SPACE` (two to four keys: learning rates, exploration or entropy, batch size, network
 width) by random search from a fixed seed; trial 0 is the quick preset itself. Each trial trains
-the quick preset with its settings under the chosen protocol for ``minutes`` minutes of CPU time
-on one torch thread (the run key ``cpu_limit``: the same work whatever else shares the
-machine), then is scored on ``eval_episodes`` held-out evaluation episodes (the
-paper's protocol: disturbance on, crashes disable, the default evader; seeds never used in
-training or in ``pes reproduce``): success rate first, mean reward second. Every learner gets
-the same budget: the same trial count, minutes and evaluation.
+the quick preset with its settings under the chosen protocol, on one torch thread, and the
+budget is experience, not time: ``env_steps`` control steps of one environment (the quick
+preset's budget by default), the same work on every machine and beside any other job.
 
-Each trial runs in ``OUT/trials/<id>/`` (its training run in ``run/``, its score in
-``result.json``), so a search killed at any point resumes where it stopped; ``OUT/tuning.json``
-and ``OUT/README.md`` list every trial's settings and score with the command.
+The budget is spent by successive halving: every trial trains to ``env_steps / 2**halvings``
+env steps and is scored; the better half trains on to twice that and is scored again; and so on
+until the last ``ceil(trials / 2**halvings)`` reach ``env_steps`` (8 trials, 2 halvings: 8 trials
+to a quarter of the budget, 4 to a half, 2 to all of it: four full trainings' worth). A trial
+that goes on resumes its own run, so its last score is that of one run trained straight to its
+budget. Each score is on ``eval_episodes`` held-out evaluation episodes, the same ones for
+every trial (the paper's protocol: disturbance on, crashes disable, the default evader; seeds
+never used in training or in ``pes reproduce``): success rate first, mean reward second. Every
+learner gets the same budget: the same trials, halvings, env steps and evaluation.
+
+Each trial runs in ``OUT/trials/<id>/`` (its training run in ``run/``, its score at each budget
+in ``result-<env_steps>.json``), so a search killed at any point resumes where it stopped;
+``OUT/tuning.json`` and ``OUT/README.md`` list every trial's settings and scores with the
+command.
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ from pes.experiments.budgets import BUDGETS, eval_config, write_json
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
 
 TUNE_EVAL_SEED = 3_000_000
-"""First seed of the held-out evaluation episodes of a trial (trial k: + 10,000 k)."""
+"""First seed of the held-out evaluation episodes of every trial."""
 
 
 def sample(space: dict[str, tuple], rng: random.Random) -> dict[str, Any]:
@@ -53,22 +61,36 @@ def sample(space: dict[str, tuple], rng: random.Random) -> dict[str, Any]:
     return values
 
 
+def rung_budgets(env_steps: int, halvings: int) -> list[int]:
+    """The env steps of each round of successive halving: ``env_steps / 2**halvings``, twice
+    that, ..., ``env_steps`` (e.g. 2,000,000 and 2: 500,000, 1,000,000, 2,000,000)."""
+    return [env_steps >> (halvings - k) for k in range(halvings + 1)]
+
+
 def make_tune_trials(
     algo: str,
     trials: int,
-    minutes: float,
+    env_steps: int,
+    halvings: int,
     eval_episodes: int,
     protocol: str,
     seed: int,
     preset: str = "quick",
 ) -> list[dict]:
     """The trial specs of a search (JSON-friendly dicts): trial 0 the quick preset, the others
-    random settings of the learner's search space, drawn from ``seed``."""
+    random settings of the learner's search space, drawn from ``seed``; ``budgets`` lists the
+    env steps of each round (:func:`rung_budgets`)."""
     cls = learner_class(algo)
     if algo not in PURSUER_ALGOS or not cls.TUNE_SPACE:
         raise ConfigError(f"pes tune takes the pursuer learners, not {algo}")
-    if trials < 1 or minutes <= 0 or eval_episodes < 1:
-        raise ConfigError("trials, minutes and eval_episodes must be positive")
+    if trials < 1 or eval_episodes < 1:
+        raise ConfigError("trials and eval_episodes must be positive")
+    if halvings < 0 or trials >> halvings < 1:
+        raise ConfigError(
+            f"halvings must be 0 to {trials.bit_length() - 1} for {trials} trials, got {halvings}"
+        )
+    if env_steps >> halvings < 1:
+        raise ConfigError(f"env_steps {env_steps} is too small for {halvings} halvings")
     rng = random.Random(f"{algo}-{seed}")
     specs = []
     for k in range(trials):
@@ -80,47 +102,63 @@ def make_tune_trials(
                 "algo": algo,
                 "preset": preset,
                 "values": values,
-                "minutes": minutes,
-                "clock": "cpu",
+                "budgets": rung_budgets(env_steps, halvings),
                 "eval_episodes": eval_episodes,
                 "protocol": protocol,
                 "seed": seed,
-                "eval_seed": TUNE_EVAL_SEED + 10_000 * k,
+                "eval_seed": TUNE_EVAL_SEED,
             }
         )
     return specs
 
 
-def finished(out: Path, spec: dict) -> dict[str, Any] | None:
-    """The result of trial ``spec`` in ``out`` if it has finished (None if not); a trial of the
-    same id run with other settings is a one-line error."""
-    done = Path(out) / "trials" / spec["id"] / "result.json"
-    if not done.is_file():
-        return None
-    record = json.loads(done.read_text())
-    if record["spec"] != spec:
+def preset_env_steps(algo: str, preset: str, protocol: str) -> int:
+    """The env-step budget of ``algo``'s ``preset`` (``pes tune``'s default trial budget)."""
+    steps = build_train_config(algo, preset, {}, protocol=protocol).env_steps
+    if steps < 1:
         raise ConfigError(
-            f"'{done.parent}' holds a trial run with other settings ({record['spec']}); "
-            "choose another --out"
+            f"the {preset} preset of {algo} has no env_steps budget: give --env-steps"
         )
-    return record
+    return steps
+
+
+def result_path(out: Path, spec: dict, env_steps: int) -> Path:
+    """Where trial ``spec``'s score at ``env_steps`` is kept."""
+    return Path(out) / "trials" / spec["id"] / f"result-{env_steps}.json"
+
+
+def finished(out: Path, spec: dict, env_steps: int) -> dict[str, Any] | None:
+    """The score of trial ``spec`` at ``env_steps`` in ``out`` if it has one (None if not); a
+    trial of the same id run with other settings is a one-line error."""
+    done = result_path(out, spec, env_steps)
+    for path in sorted(done.parent.glob("result-*.json")):
+        record = json.loads(path.read_text())
+        if record["spec"] != spec:
+            raise ConfigError(
+                f"'{done.parent}' holds a trial run with other settings ({record['spec']}); "
+                "choose another --out"
+            )
+    return json.loads(done.read_text()) if done.is_file() else None
 
 
 def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
-    """Train and score one trial in ``out/trials/<id>`` (resumed from its checkpoint if one is
-    there); returns its ``result.json`` contents."""
-    folder = Path(out) / "trials" / spec["id"]
-    done = folder / "result.json"
-    record = finished(out, spec)
+    """Train trial ``spec`` in ``out/trials/<id>/run`` to ``spec["env_steps"]`` env steps
+    (resumed from its checkpoint if one is there) and score it; returns the contents of its
+    ``result-<env_steps>.json``."""
+    spec, env_steps = dict(spec), spec["env_steps"]
+    del spec["env_steps"]
+    record = finished(out, spec, env_steps)
     if record is not None:
         return record
+    folder = Path(out) / "trials" / spec["id"]
     folder.mkdir(parents=True, exist_ok=True)
     values = {
         **spec["values"],
         "seed": spec["seed"],
-        "cpu_limit": spec["minutes"],  # CPU minutes: the same work beside other jobs
+        "env_steps": env_steps,  # experience: the same work on any machine, beside any job
         "time_limit": 0.0,
-        "episodes": 10**7,  # the minutes bind
+        "cpu_limit": 0.0,
+        "episodes": 10**7,  # the env steps bind
         "eval_episodes": 0,
         "threads": threads or 1,
         "log_every": 50,
@@ -128,10 +166,10 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     cfg = build_train_config(spec["algo"], spec["preset"], values, protocol=spec["protocol"])
     run = folder / "run"
     summary_path = run / "summary.json"
-    stopped = json.loads(summary_path.read_text())["stopped_by"] if summary_path.is_file() else ""
-    if stopped in ("", "interrupted"):
+    trained = json.loads(summary_path.read_text())["env_steps"] if summary_path.is_file() else 0
+    if trained < env_steps:
         train(cfg, run, resume=(run / "checkpoint.pt").is_file(), progress=False)
-    train_summary = json.loads((run / "summary.json").read_text())
+    train_summary = json.loads(summary_path.read_text())
     env_cfg = eval_config(BUDGETS["quick"])
     policy, _ = load_pursuer_policy(run / "policy.pt", env_cfg)
     episodes = spec["eval_episodes"]
@@ -140,14 +178,16 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     ).summary()
     record = {
         "spec": spec,
+        "env_steps": env_steps,
         "learner": cfg.learner.__dict__,
         "train": {
-            k: train_summary[k] for k in ("episodes", "env_steps", "updates", "wall_s", "cpu_s")
+            k: train_summary[k]
+            for k in ("episodes", "env_steps", "updates", "wall_s", "cpu_s", "stopped_by")
         },
         "eval": result,
         "score": score(result),
     }
-    write_json(done, record)
+    write_json(result_path(out, spec, env_steps), record)
     return record
 
 
@@ -158,10 +198,33 @@ def score(result: dict[str, Any]) -> float:
     return result["success_rate"] + 1e-5 * result["mean_reward"]
 
 
+def survivors(records: list[dict], keep: int) -> list[str]:
+    """The ids of the ``keep`` best-scored records (ties: the lower id)."""
+    ranked = sorted(records, key=lambda r: (-r["score"], r["spec"]["id"]))
+    return [r["spec"]["id"] for r in ranked[:keep]]
+
+
+def pending(out: Path, specs: list[dict]) -> tuple[int, list[dict]] | None:
+    """The round of successive halving still to run: its env steps and the trials that have
+    no score there yet (None once the search is complete). Round k's trials are the
+    ``ceil(trials / 2**k)`` best of round k - 1."""
+    alive = specs
+    budgets = specs[0]["budgets"]
+    for k, budget in enumerate(budgets):
+        scored = [r for s in alive if (r := finished(out, s, budget)) is not None]
+        if len(scored) < len(alive):
+            return budget, [s for s in alive if finished(out, s, budget) is None]
+        if k < len(budgets) - 1:
+            keep = set(survivors(scored, math.ceil(len(specs) / 2 ** (k + 1))))
+            alive = [s for s in alive if s["id"] in keep]
+    return None
+
+
 def tune(
     algo: str,
     trials: int = 8,
-    minutes: float = 30.0,
+    env_steps: int = 0,
+    halvings: int = 2,
     eval_episodes: int = 200,
     protocol: str = "pes",
     seed: int = 0,
@@ -175,86 +238,130 @@ def tune(
     report_only: bool = False,
 ) -> dict[str, Any]:
     """Run (or finish) the search of ``algo`` into ``out`` and write its report; returns a
-    summary with every finished trial, best first. ``preset`` is the budget each trial trains
-    (``quick``; ``tiny`` for tests); ``report_only`` runs no trial and reports the scored ones."""
+    summary with every scored trial, best first. ``env_steps`` is the budget of the trials that
+    go furthest (0: the preset's ``env_steps``), ``halvings`` the rounds of successive halving
+    before them; ``preset`` is what each trial trains (``quick``; ``tiny`` for tests);
+    ``report_only`` runs no trial and reports the scored ones."""
     if algo not in ALGOS:
         raise ConfigError(f"algo must be one of {', '.join(ALGOS)}, got '{algo}'")
-    specs = make_tune_trials(algo, trials, minutes, eval_episodes, protocol, seed, preset)
+    env_steps = env_steps or preset_env_steps(algo, preset, protocol)
+    specs = make_tune_trials(
+        algo, trials, env_steps, halvings, eval_episodes, protocol, seed, preset
+    )
     out = Path(out or f"results/tuning/{algo}")
     out.mkdir(parents=True, exist_ok=True)
     use_ray = choose_runner(use_ray, ray_address)
-    todo = [] if report_only else [s for s in specs if finished(out, s) is None]
     start = time.time()
-    view = SweepProgress(len(specs), len(specs) - len(todo), progress and bool(todo), "tune")
-    try:
-        if todo and use_ray:
-            run_ray(todo, out, ray_address, view, run_tune_trial, parallel, "tune")
-        elif todo:
-            run_sequential(todo, out, view, run_tune_trial)
-    finally:
-        view.close()
+    while not report_only and (round_ := pending(out, specs)) is not None:
+        budget, todo = round_
+        view = SweepProgress(len(todo), 0, progress, f"tune {budget:,} env steps")
+        batch = [{**s, "env_steps": budget} for s in todo]
+        try:
+            if use_ray:
+                run_ray(batch, out, ray_address, view, run_tune_trial, parallel, "tune")
+            else:
+                run_sequential(batch, out, view, run_tune_trial)
+        finally:
+            view.close()
     return write_tuning_report(out, specs, command, time.time() - start)
 
 
 def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: float) -> dict:
-    """``tuning.json`` and ``README.md`` of the finished trials, best first."""
+    """``tuning.json`` and ``README.md`` of the scored trials: each trial's score at every budget
+    it reached, the trials ranked by the furthest budget they reached, then by their score
+    there."""
+    first = specs[0]
+    budgets = first["budgets"]
     results = []
     for spec in specs:
-        path = out / "trials" / spec["id"] / "result.json"
-        if path.is_file():
-            record = json.loads(path.read_text())
-            record["score"] = score(record["eval"])  # today's score of trials scored before
-            results.append(record)
-    results.sort(key=lambda r: r["score"], reverse=True)
-    first = specs[0]
+        scores = {b: r for b in budgets if (r := finished(out, spec, b)) is not None}
+        if not scores:
+            continue
+        last = max(scores)
+        record = scores[last]
+        results.append(
+            {
+                "id": spec["id"],
+                "values": spec["values"],
+                "env_steps": last,
+                "score": round(score(record["eval"]), 5),
+                "success_rate": record["eval"]["success_rate"],
+                "mean_steps": record["eval"]["mean_steps"],
+                "mean_crashes": record["eval"]["mean_crashes"],
+                "train_episodes": record["train"]["episodes"],
+                "updates": record["train"]["updates"],
+                "cpu_s": record["train"]["cpu_s"],
+                "by_budget": {
+                    str(b): {
+                        "success_rate": r["eval"]["success_rate"],
+                        "mean_reward": r["eval"]["mean_reward"],
+                        "mean_steps": r["eval"]["mean_steps"],
+                    }
+                    for b, r in scores.items()
+                },
+            }
+        )
+    results.sort(key=lambda r: (-r["env_steps"], -r["score"], r["id"]))
+    finals = math.ceil(len(specs) / 2 ** (len(budgets) - 1))
+    complete = pending(out, specs) is None
     summary = {
         "algo": first["algo"],
         "protocol": first["protocol"],
         "trials": len(specs),
-        "finished": len(results),
-        "minutes_per_trial": first["minutes"],
-        "clock": "cpu",
+        "scored": len(results),
+        "complete": complete,
+        "budgets": budgets,
+        "budget_unit": "env steps",
         "eval_episodes": first["eval_episodes"],
+        "eval_seed": first["eval_seed"],
         "search_space": {k: list(v) for k, v in learner_class(first["algo"]).TUNE_SPACE.items()},
         "command": command,
         "seconds_this_run": round(seconds, 1),
-        "best": results[0]["spec"]["values"] if results else None,
-        "results": [
-            {
-                "id": r["spec"]["id"],
-                "values": r["spec"]["values"],
-                "score": round(r["score"], 5),
-                "success_rate": r["eval"]["success_rate"],
-                "mean_steps": r["eval"]["mean_steps"],
-                "mean_crashes": r["eval"]["mean_crashes"],
-                "train_episodes": r["train"]["episodes"],
-                "train_env_steps": r["train"]["env_steps"],
-                "updates": r["train"]["updates"],
-            }
-            for r in results
-        ],
+        "best": results[0]["values"] if complete else None,
+        "results": results,
     }
     write_json(out / "tuning.json", summary)
+    heads = " | ".join(f"{b:,} steps" for b in budgets)
     lines = [
         f"# Tuning `{first['algo']}` ({first['protocol']} protocol)",
         "",
-        f"{len(results)} of {len(specs)} trials finished; each trains the quick preset with its "
-        f"settings for {first['minutes']:g} minutes of CPU time on one torch thread and is "
-        "scored on "
-        f"{first['eval_episodes']} held-out episodes (disturbance on, crashes disable, the "
-        "default evader). Trial t00 is the quick preset itself.",
+        f"{len(results)} of {len(specs)} trials scored"
+        + ("; the search is complete." if complete else "; the search is not finished.")
+        + f" Successive halving in env steps: every trial trains the quick preset with its "
+        f"settings to {budgets[0]:,} env steps on one torch thread, "
+        + (
+            "the better half of them goes on to twice that, and so on up to "
+            f"{budgets[-1]:,} ({finals} trials). "
+            if len(budgets) > 1
+            else ""
+        )
+        + f"Each score is on the same {first['eval_episodes']} held-out episodes (disturbance "
+        "on, crashes disable, the default evader): success rate, then mean reward. Trial t00 is "
+        "the quick preset itself. Trials are ranked by the furthest budget they reached, then "
+        "by their score there.",
         "",
         f"Command: `{command}`" if command else "",
         "",
-        "| trial | settings | success | steps | crashes | training episodes | env steps |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        f"| trial | settings | {heads} | steps | crashes | CPU hours |",
+        "| --- | --- | " + "--- | " * len(budgets) + "--- | --- | --- |",
     ]
-    for r in summary["results"]:
+    for r in results:
         settings = ", ".join(f"{k}={v}" for k, v in r["values"].items()) or "(quick preset)"
-        lines.append(
-            f"| {r['id']} | {settings} | {100 * r['success_rate']:.1f} % | "
-            f"{r['mean_steps']:.0f} | {r['mean_crashes']:.2f} | {r['train_episodes']} | "
-            f"{r['train_env_steps']:,} |"
+        cells = " | ".join(
+            f"{100 * r['by_budget'][str(b)]['success_rate']:.1f} % "
+            f"({r['by_budget'][str(b)]['mean_reward']:.3f})"
+            if str(b) in r["by_budget"]
+            else ""
+            for b in budgets
         )
+        lines.append(
+            f"| {r['id']} | {settings} | {cells} | {r['mean_steps']:.0f} | "
+            f"{r['mean_crashes']:.2f} | {r['cpu_s'] / 3600:.2f} |"
+        )
+    lines += [
+        "",
+        "Each budget's cell: success rate (mean reward per step of the paper's reward); steps and "
+        "crashes: mean per episode at the trial's furthest budget; CPU hours: its training's.",
+    ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}

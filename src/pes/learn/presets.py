@@ -1,14 +1,21 @@
 """The parts of the budget presets that every method shares, so that a comparison's methods
-run on the same budget: the ``quick`` run (a laptop CPU, 60 minutes, 32 environments, the
-shipped DDPG evader as opponent) and the ``tiny`` run of the tests (with the protocol's aids
-scaled down to its 40 episodes)."""
+run on the same budget: the ``quick`` run (2,000,000 env steps from 32 environments against the
+shipped DDPG evader: a laptop CPU's hour or two) and the ``tiny`` run of the tests (with the
+protocol's aids scaled down to its 40 episodes)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-QUICK_RUN: dict[str, Any] = dict(num_envs=32, time_limit=60.0, env=dict(evader_policy="ddpg"))
-"""Run keys of every method's ``quick`` preset (its episodes are the method's own)."""
+QUICK_RUN: dict[str, Any] = dict(
+    num_envs=32, env_steps=2_000_000, episodes=10**6, env=dict(evader_policy="ddpg")
+)
+"""Run keys of every method's ``quick`` preset. Its budget is experience, the same for every
+method and on every machine: 2,000,000 env steps (one control step of one environment each;
+the episodes do not bind). CBC-TP Net's preset captured 88-92 % of 1000 evaluation episodes
+after about 2 M env steps in research/n_step_targets.md (runs y3, v1). Its hours depend on the
+method and the CPU: CBC-TP Net's about 0.8 to 2.6 on one thread of the hosts measured
+(docs/training.md)."""
 
 TINY_RUN: dict[str, Any] = dict(
     compile_env=False,  # compiling the step costs more than a tiny run saves by it

@@ -356,15 +356,23 @@ def train(
     row_start = (start, prog.env_steps, prog.updates)
     deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
     cpu_deadline = cfg.cpu_limit * 60.0 if cfg.cpu_limit > 0 else math.inf
+    # The bar counts what the budget counts: env steps under an env_steps budget, else episodes.
+    by_steps = cfg.env_steps > 0
+    total, done_so_far = (
+        (cfg.env_steps, prog.env_steps) if by_steps else (cfg.episodes, prog.episodes)
+    )
+    unit = "env steps" if by_steps else "ep"
     bar = tqdm(
-        total=cfg.episodes,
-        initial=min(prog.episodes, cfg.episodes),
-        unit="ep",
+        total=total,
+        initial=min(done_so_far, total),
+        unit_scale=by_steps,
         desc=f"train {cfg.algo} ({protocol.name})",
         disable=not progress,
         dynamic_ncols=True,
-        # tqdm's own estimate counts episodes only: "left" below also knows the time limit.
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} ep [{elapsed}{postfix}]",
+        # tqdm's own estimate counts one budget only: "left" below also knows the other limits.
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
+        + unit
+        + " [{elapsed}{postfix}]",
     )
     first_episode, first_steps = prog.episodes, prog.env_steps
     row: dict[str, float] | None = None  # the latest log row
@@ -417,6 +425,8 @@ def train(
                 learner.record(info, actions, evader_actions, reward, terminated, info2)
                 reward_sum += (reward * alive).sum(-1) / alive.sum(-1).clamp(min=1.0)
                 prog.env_steps += cfg.num_envs
+                if by_steps:
+                    bar.update(cfg.num_envs)
                 done = terminated | truncated
                 if bool(done.any()):
                     idx = torch.nonzero(done).flatten()
@@ -428,7 +438,8 @@ def train(
                     reward_sum[idx] = 0.0
                     learner.episode_reset(done)
                     prog.episodes += len(idx)
-                    bar.update(len(idx))
+                    if not by_steps:
+                        bar.update(len(idx))
                     if progress and time.perf_counter() - shown >= 1.0:
                         show(time.perf_counter())
                 obs, info = obs2, info2
