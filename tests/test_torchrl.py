@@ -324,26 +324,27 @@ def test_torchrl_policy_refuses_a_recurrent_module():
         TorchRLPolicy(module)
 
 
-def test_benchmarl_reference_run_stops_at_its_cpu_budget_and_is_evaluated(tmp_path):
-    """A reference run on pes/train: BenchMARL's configs, stopped by CPU time with a
-    checkpoint, that checkpoint evaluated with PES's protocol; a second call reads the result."""
+def test_benchmarl_reference_run_stops_at_its_frame_budget_and_is_evaluated(tmp_path):
+    """A reference run on pes/train: BenchMARL's configs, stopped by its budget of frames (env
+    steps) with a checkpoint, that checkpoint evaluated with PES's protocol; a second call
+    reads the result; a larger budget resumes from the checkpoint."""
     pytest.importorskip("benchmarl")
-    from pes.benchmarl.reference import run_reference
+    from pes.benchmarl.reference import quick_frames, run_reference
 
+    assert quick_frames() == 2_000_000
     small = {
         "on_policy_collected_frames_per_batch": 60,
         "on_policy_n_envs_per_worker": 2,
         "on_policy_n_minibatch_iters": 1,
         "on_policy_minibatch_size": 20,
     }
-    kwargs = dict(cpu_minutes=0.02, eval_episodes=2, checkpoint_every=1)
+    kwargs = dict(frames=120, eval_episodes=2, checkpoint_every=1)
     result = run_reference("mappo", 0, tmp_path, experiment_overrides=small, **kwargs)
-    assert result["cpu_s"] >= 0.02 * 60 and result["frames"] >= 60
+    assert result["frames"] == result["frame_budget"] == 120 and result["cpu_s"] > 0
     assert result["eval"]["episodes"] == 2 and result["task"] == "pes/train"
     assert (tmp_path / result["checkpoint"]).is_file()
     assert run_reference("mappo", 0, tmp_path, **kwargs) == result
-    # A larger budget resumes from the checkpoint with the CPU time spent up to it.
     (tmp_path / "result.json").unlink()
-    longer = dict(kwargs, cpu_minutes=(result["cpu_s"] + 1.0) / 60)
+    longer = dict(kwargs, frames=240)
     resumed = run_reference("mappo", 0, tmp_path, experiment_overrides=small, **longer)
-    assert resumed["frames"] > result["frames"] and resumed["cpu_s"] >= result["cpu_s"] + 1.0
+    assert resumed["frames"] == 240 and resumed["cpu_s"] > result["cpu_s"]

@@ -2,22 +2,22 @@
 
     python -m pes.benchmarl.reference --algorithm mappo --seed 0 --out results/benchmarl/mappo-s0
 
-One run: BenchMARL's own algorithm, model (MLP) and experiment configs, unchanged except that
-the run is stopped by a budget of CPU time instead of frames, trained on the task ``pes/train``
-(the scenario PES's own learners train in under the ``pes`` protocol), on one torch thread; then
-its last checkpoint is evaluated with PES's own protocol (``pes eval``'s: 1000 episodes,
-disturbance on, crashes disable, the default evader; the seeds of ``pes reproduce``).
+One run: BenchMARL's own algorithm, model (MLP) and experiment configs, unchanged except for
+the budget, trained on the task ``pes/train`` (the scenario PES's own learners train in under
+the ``pes`` protocol), on one torch thread; then its last checkpoint is evaluated with PES's
+own protocol (``pes eval``'s: 1000 episodes, disturbance on, crashes disable, the default
+evader; the seeds of ``pes reproduce``).
 
-The budget is CPU time of this process (``--cpu-minutes``, default 60: a quick preset's hour on
-one core), the same work whatever else runs on the machine. Every iteration adds its CPU time
-to ``OUT/budget.json``, and a checkpoint is written every ``--checkpoint-every`` iterations, so
-running the same command again resumes from the last checkpoint with the CPU time spent up to
-it (the iterations after that checkpoint are done again). Writes
-``OUT/<experiment>/`` (BenchMARL's folder: CSV logs, checkpoints, ``config.pkl``),
-``OUT/budget.json`` and ``OUT/result.json`` (the command, the counters, the evaluation).
+The budget is experience: ``--frames`` (BenchMARL's ``max_n_frames``; a frame is one step of one
+environment, as PES's ``env_steps``), by default the quick presets' 2,000,000, the same work on
+any machine and beside any job. A checkpoint is written every ``--checkpoint-every``
+iterations, so running the same command again resumes from the last checkpoint (the
+iterations after it are done again). Writes ``OUT/<experiment>/`` (BenchMARL's folder: CSV logs,
+checkpoints, ``config.pkl``), ``OUT/cpu.json`` (the CPU time spent, for the record) and
+``OUT/result.json`` (the command, the counters, the evaluation).
 
 What BenchMARL gets and PES's learners get alike: the scenario, the training reward, the
-disturbance, the CPU budget and the evaluation. What it does not get: the ``pes`` protocol's
+disturbance, the env steps and the evaluation. What it does not get: the ``pes`` protocol's
 other aids (PID(PF)'s demonstrations, the crash curriculum, the noise schedule, n-step targets,
 greedy environments), which are PES's trainer's; a report quoting these runs says so.
 """
@@ -25,7 +25,6 @@ greedy environments), which are PES's trainer's; a report quoting these runs say
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import shlex
 import sys
@@ -39,6 +38,7 @@ from benchmarl.experiment import Experiment, ExperimentConfig
 from benchmarl.experiment.callback import Callback
 from benchmarl.models import MlpConfig
 
+from pes.algos import build_train_config
 from pes.benchmarl import PESTask
 from pes.benchmarl.policy import load_benchmarl_policy
 from pes.evaluate import evaluate
@@ -48,41 +48,24 @@ ALGORITHMS = {"mappo": "Mappo", "ippo": "Ippo", "maddpg": "Maddpg", "masac": "Ma
 """``--algorithm`` name -> BenchMARL's config class prefix."""
 
 
-class _BudgetSpentError(Exception):
-    """Raised by :class:`CpuBudget` once the budget is spent (the checkpoint is written)."""
+def quick_frames() -> int:
+    """The quick presets' budget of env steps (the same for every PES learner)."""
+    return build_train_config("maddpg", "quick").env_steps
 
 
-class CpuBudget(Callback):
-    """Stops a BenchMARL experiment after ``minutes`` of this process's CPU time (``spent``
-    seconds already used by earlier runs of it), with a checkpoint; records the time spent in
-    ``record`` after every iteration."""
+class CpuClock(Callback):
+    """Records in ``record``, after every iteration, the CPU time of this process added to the
+    ``spent`` seconds of earlier runs of the experiment, and the frames so far."""
 
-    def __init__(self, minutes: float, spent: float, record: Path) -> None:
+    def __init__(self, spent: float, record: Path) -> None:
         super().__init__()
-        self.budget_s, self.spent_before, self.record = 60.0 * minutes, spent, record
-        self.at_checkpoint = spent  # CPU time spent up to the latest checkpoint
+        self.spent_before, self.record = spent, record
         self.start = time.process_time()
 
-    def spent(self) -> float:
-        return self.spent_before + time.process_time() - self.start
-
     def on_train_end(self, training_td, group: str) -> None:
-        exp = self.experiment
-        spent = round(self.spent(), 1)
-        over = spent >= self.budget_s
-        # BenchMARL checkpoints at the end of this iteration when the frames say so.
-        checkpoints = exp.config.checkpoint_interval > 0 and (
-            exp.total_frames % exp.config.checkpoint_interval == 0
-        )
-        if checkpoints or over:
-            self.at_checkpoint = spent
-        write_json(
-            self.record,
-            {"cpu_s": spent, "frames": exp.total_frames, "checkpoint_cpu_s": self.at_checkpoint},
-        )
-        if over:
-            exp._save_experiment()  # BenchMARL's own checkpoint writer
-            raise _BudgetSpentError
+        spent = self.spent_before + time.process_time() - self.start
+        frames = self.experiment.total_frames
+        write_json(self.record, {"cpu_s": round(spent, 1), "frames": frames})
 
 
 def _latest_checkpoint(out: Path) -> Path | None:
@@ -96,36 +79,34 @@ def run_reference(
     algorithm: str,
     seed: int,
     out: str | Path,
-    cpu_minutes: float = 60.0,
+    frames: int = 0,
     eval_episodes: int = 1000,
     checkpoint_every: int = 10,
     experiment_overrides: dict[str, Any] | None = None,
     command: str = "",
 ) -> dict[str, Any]:
-    """Train (or finish) one reference run into ``out`` and evaluate it; returns ``result.json``
-    (see the module docstring). ``experiment_overrides``: ``ExperimentConfig`` fields to change
-    (tests shrink the batches)."""
+    """Train (or finish) one reference run of ``frames`` env steps (0: the quick presets'
+    budget) into ``out`` and evaluate it; returns ``result.json`` (see the module docstring).
+    ``experiment_overrides``: ``ExperimentConfig`` fields to change (tests shrink the
+    batches)."""
     out = Path(out)
     done = out / "result.json"
     if done.is_file():
         return json.loads(done.read_text())
     if algorithm not in ALGORITHMS:
         raise ValueError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got '{algorithm}'")
+    frames = frames or quick_frames()
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
-    record = out / "budget.json"
+    record = out / "cpu.json"
     resume = _latest_checkpoint(out)
-    # The CPU time up to the checkpoint a resumed run starts from (nothing without one).
-    spent = 0.0
-    if resume is not None and record.is_file():
-        state = json.loads(record.read_text())
-        spent = state.get("checkpoint_cpu_s", state["cpu_s"])
+    spent = json.loads(record.read_text())["cpu_s"] if resume and record.is_file() else 0.0
 
     config = ExperimentConfig.get_from_yaml()
     config.save_folder = str(out)
     config.loggers = ["csv"]
     config.create_json = True
-    config.max_n_frames = 10**12  # the CPU budget binds
+    config.max_n_frames = frames
     config.max_n_iters = None
     config.evaluation = False  # PES evaluates the last checkpoint with its own protocol
     config.checkpoint_at_end = True
@@ -136,21 +117,17 @@ def run_reference(
     config.checkpoint_interval = checkpoint_every * config.collected_frames_per_batch(on_policy)
     config.keep_checkpoints_num = 2
     config.restore_file = str(resume) if resume is not None else None
-    budget = CpuBudget(cpu_minutes, spent, record)
-    if spent < 60.0 * cpu_minutes:
-        experiment = Experiment(
+    reached = int(resume.stem.split("_")[-1]) if resume is not None else 0
+    if reached < frames:
+        Experiment(
             task=PESTask.TRAIN.get_task(),
             algorithm_config=getattr(algorithms, f"{ALGORITHMS[algorithm]}Config").get_from_yaml(),
             model_config=MlpConfig.get_from_yaml(),
             critic_model_config=MlpConfig.get_from_yaml(),
             seed=seed,
             config=config,
-            callbacks=[budget],
-        )
-        # The budget stops the run by an exception, after which BenchMARL closes the
-        # experiment itself (and prints that it "failed").
-        with contextlib.suppress(_BudgetSpentError):
-            experiment.run()
+            callbacks=[CpuClock(spent, record)],
+        ).run()
     checkpoint = _latest_checkpoint(out)
     env_cfg = eval_config(BUDGETS["quick"])
     policy = load_benchmarl_policy(checkpoint, env_cfg)
@@ -161,17 +138,17 @@ def run_reference(
         num_envs=min(EVAL_ENVS, eval_episodes),
         seed=EVAL_SEED + 10_000 * seed,
     )
-    state = json.loads(record.read_text()) if record.is_file() else {}
+    clock = json.loads(record.read_text()) if record.is_file() else {}
     summary = {
         "method": f"{algorithm.upper()} (BenchMARL)",
         "algorithm": algorithm,
         "seed": seed,
         "task": "pes/train",
-        "cpu_minutes": cpu_minutes,
+        "frame_budget": frames,
         "command": command,
         "checkpoint": str(checkpoint.relative_to(out)),
         "frames": int(checkpoint.stem.split("_")[-1]),
-        "cpu_s": state.get("cpu_s"),
+        "cpu_s": clock.get("cpu_s"),
         "eval": result.summary(),
     }
     write_json(done, summary)
@@ -184,7 +161,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--algorithm", required=True, choices=list(ALGORITHMS))
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--cpu-minutes", type=float, default=60.0)
+    parser.add_argument(
+        "--frames", type=int, default=0, help="env steps (default: the quick presets' 2,000,000)"
+    )
     parser.add_argument("--eval-episodes", type=int, default=1000)
     parser.add_argument("--checkpoint-every", type=int, default=10, help="iterations")
     parser.add_argument("--out", required=True)
@@ -194,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         args.algorithm,
         args.seed,
         args.out,
-        cpu_minutes=args.cpu_minutes,
+        frames=args.frames,
         eval_episodes=args.eval_episodes,
         checkpoint_every=args.checkpoint_every,
         command=command,
