@@ -83,7 +83,7 @@ def test_rerun_skips_finished_trials(sweep):
 
 
 @pytest.mark.slow
-def test_report_only_runs_nothing(sweep, tmp_path):
+def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_path):
     out, _ = sweep
     (out / "table4.md").unlink()
     summary = reproduce(
@@ -92,6 +92,33 @@ def test_report_only_runs_nothing(sweep, tmp_path):
     assert summary["ran"] == 0 and summary["skipped"] == 3 and summary["unfinished"] == 3
     assert "Seeds per method: PID(PF) 1" in (out / "table4.md").read_text()
     assert not (out / "trials" / "cbc-s1").exists()
+    # Outside reference runs (the records pes.benchmarl.reference writes) as Table IV columns;
+    # the evaluation of PID(PF)'s trial stands in for a reference run's here.
+    pid_eval = json.loads((out / "evals.json").read_text())["pid-pf-s0"]["evals"]["table4"]
+    outside = tmp_path / "benchmarl"
+    for seed in (0, 1):
+        record = {
+            "method": "MAPPO (BenchMARL)",
+            "seed": seed,
+            "frames": 2_004_000,
+            "command": f"python -m pes.benchmarl.reference --algorithm mappo --seed {seed}",
+            "eval": {**pid_eval, "success_rate": 0.25 + 0.5 * seed},
+        }
+        (outside / f"mappo-s{seed}").mkdir(parents=True)
+        (outside / f"mappo-s{seed}" / "result.json").write_text(json.dumps(record))
+    reproduce(
+        "table4", budget="tiny", seeds=1, out=out, methods=METHODS, use_ray=False,
+        report_only=True, outside=outside,
+    )  # fmt: skip
+    table4 = (out / "table4.md").read_text()
+    header = next(line for line in table4.splitlines() if line.startswith("| |"))
+    assert header.endswith("| CBC-TP Net | MAPPO (BenchMARL) |")
+    assert "50.0 ± 35.4 %" in table4 and "MAPPO (BenchMARL) 2" in table4
+    assert "2,004,000 frames" in table4 and "--algorithm mappo --seed 1" in table4
+    meta = json.loads((out / "reproduce.json").read_text())
+    assert [r["seed"] for r in meta["outside"]["runs"]] == [0, 1]
+    with pytest.raises(pes.errors.ConfigError, match="no folder"):
+        reproduce("table4", budget="tiny", out=out, outside=tmp_path / "nope", report_only=True)
 
 
 @pytest.mark.slow

@@ -464,6 +464,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         parallel=args.parallel,
         report_only=args.report_only,
         protocol=args.protocol,
+        outside=args.outside,
     )
     if args.json:
         _print_json(summary)
@@ -786,6 +787,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--report-only",
         action="store_true",
         help="run no trial: write the tables and figures of the trials finished so far",
+    )
+    p.add_argument(
+        "--outside",
+        default=None,
+        metavar="DIR",
+        help="outside reference runs (python -m pes.benchmarl.reference, one subfolder each) "
+        "to show beside the methods in Table IV",
     )
     p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

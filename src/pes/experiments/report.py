@@ -80,15 +80,38 @@ def _header(title: str, meta: dict) -> list[str]:
     ]
 
 
-def table4(specs: list[dict], done: dict, meta: dict) -> str | None:
+def load_outside(folder: str | Path | None) -> dict[str, list[dict]]:
+    """Outside reference runs for Table IV (``python -m pes.benchmarl.reference``): the
+    ``result.json`` of every subfolder of ``folder``, grouped by their method label ("MAPPO
+    (BenchMARL)", ...), seeds in order. Nothing for None."""
+    runs: dict[str, list[dict]] = {}
+    if folder is None:
+        return runs
+    for path in sorted(Path(folder).glob("*/result.json")):
+        record = json.loads(path.read_text())
+        runs.setdefault(record["method"], []).append(record)
+    for records in runs.values():
+        records.sort(key=lambda r: r["seed"])
+    return runs
+
+
+def table4(
+    specs: list[dict], done: dict, meta: dict, outside: dict[str, list[dict]] | None = None
+) -> str | None:
+    """Table IV of the finished trials beside the paper's, with the ``outside`` reference runs
+    (:func:`load_outside`) as extra columns."""
     rows = _by_method(specs, done)
     methods = [m for m in LABELS if m in rows]
-    if not methods:
+    outside = outside or {}
+    if not methods and not outside:
         return None
+    columns = {LABELS[m]: rows[m] for m in methods}
+    columns.update({label: [r["eval"] for r in runs] for label, runs in outside.items()})
+    paper_of = {LABELS[m]: TABLE4[m] for m in methods}
     lines = _header("Table IV: every method against the DDPG evader", meta)
     lines += [
-        "| | " + " | ".join(LABELS[m] for m in methods) + " |",
-        "| --- |" + " --- |" * len(methods),
+        "| | " + " | ".join(columns) + " |",
+        "| --- |" + " --- |" * len(columns),
     ]
     metrics = (
         ("success rate", "success_rate", 100.0, 1, " %"),
@@ -96,8 +119,10 @@ def table4(specs: list[dict], done: dict, meta: dict) -> str | None:
         ("average reward", "mean_reward", 1.0, 3, ""),
     )
     for label, key, scale, digits, unit in metrics:
-        ours = [_fmt([r[key] for r in rows[m]], scale, digits, unit) for m in methods]
-        paper = [_paper(TABLE4[m][key], scale, digits, unit) for m in methods]
+        ours = [_fmt([r[key] for r in evals], scale, digits, unit) for evals in columns.values()]
+        paper = [
+            _paper(paper_of[c][key], scale, digits, unit) if c in paper_of else "—" for c in columns
+        ]
         lines.append(f"| {label} (PES) | " + " | ".join(ours) + " |")
         lines.append(f"| {label} (paper) | " + " | ".join(paper) + " |")
     failures = (
@@ -106,14 +131,31 @@ def table4(specs: list[dict], done: dict, meta: dict) -> str | None:
         ("crashes per episode (PES)", "mean_crashes", 1.0, 2, ""),
     )
     for label, key, scale, digits, unit in failures:
-        ours = [_fmt([r[key] for r in rows[m] if key in r], scale, digits, unit) for m in methods]
+        ours = [
+            _fmt([r[key] for r in evals if key in r], scale, digits, unit)
+            for evals in columns.values()
+        ]
         lines.append(f"| {label} | " + " | ".join(ours) + " |")
     lines += [
         "",
-        "Seeds per method: " + ", ".join(f"{LABELS[m]} {len(rows[m])}" for m in methods) + ".",
+        "Seeds per method: " + ", ".join(f"{c} {len(e)}" for c, e in columns.items()) + ".",
         "CBC Net (the ablation of §V-C) is not in the paper's Table IV.",
-        "",
     ]
+    if outside:
+        frames = sorted({r["frames"] for runs in outside.values() for r in runs})
+        episodes = sorted({r["eval"]["episodes"] for runs in outside.values() for r in runs})
+        lines.append(
+            "Outside columns (" + ", ".join(outside) + "): BenchMARL's own algorithm, MLP model "
+            "and experiment configs on the task `pes/train` (the scenario, training reward and "
+            f"disturbance of the `pes` protocol), {', '.join(f'{f:,}' for f in frames)} frames "
+            "(env steps) per run, evaluated as the other columns (the same seeds; "
+            f"{', '.join(map(str, episodes))} episodes); they do not get the `pes` protocol's "
+            "other aids (PID(PF)'s demonstrations, the crash curriculum, the noise schedule, "
+            "n-step targets, greedy environments). Commands: "
+            + "; ".join(f"`{r['command']}`" for runs in outside.values() for r in runs)
+            + "."
+        )
+    lines.append("")
     return "\n".join(lines)
 
 
@@ -339,9 +381,12 @@ def write_report(
     command: str,
     seconds: float,
     protocol: str = "pes",
+    outside: str | Path | None = None,
 ) -> list[str]:
-    """Write every table and figure the finished trials allow; returns the files written."""
+    """Write every table and figure the finished trials allow; returns the files written.
+    ``outside``: a folder of outside reference runs for Table IV (:func:`load_outside`)."""
     done = _load(out, specs)
+    references = load_outside(outside)
     machine = machine_info()
     cfg = eval_config(BUDGETS[budget])
     meta = {
@@ -361,7 +406,7 @@ def write_report(
     tables = {"table4": table4, "table5": table5, "table6": table6}
     for name, fn in tables.items():
         if target in (name, "all") or (target == "figures" and name == "table4"):
-            text = fn(specs, done, meta)
+            text = fn(specs, done, meta, references) if name == "table4" else fn(specs, done, meta)
             if text is not None:
                 (out / f"{name}.md").write_text(text)
                 written.append(f"{name}.md")
@@ -400,6 +445,14 @@ def write_report(
             "commit": source_commit(),
             "trial_commits": {k: done[k].get("commit") for k in evals},
             "trial_configs": {k: _resolved_config(out / "trials" / k) for k in evals},
+            "outside": {
+                "folder": str(outside) if outside is not None else None,
+                "runs": [
+                    {k: r[k] for k in ("method", "seed", "frames", "command")}
+                    for runs in references.values()
+                    for r in runs
+                ],
+            },
             "machine": machine,
         },
     )

@@ -61,6 +61,7 @@ def reproduce(
     parallel: int = 0,
     report_only: bool = False,
     protocol: str | None = None,
+    outside: str | Path | None = None,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
@@ -69,6 +70,8 @@ def reproduce(
     ``use_ray``: None uses Ray when it is installed; False runs the trials in this process.
     ``parallel``: at most this many trials at once under Ray (0: one per CPU).
     ``report_only``: run nothing; write the report of the trials finished so far.
+    ``outside``: a folder of outside reference runs (``python -m pes.benchmarl.reference``, one
+    subfolder each) that Table IV shows as extra columns.
     """
     if budget not in BUDGETS:
         raise ConfigError(f"budget must be one of {', '.join(BUDGETS)}, got '{budget}'")
@@ -77,6 +80,8 @@ def reproduce(
     protocol = protocol or ("paper" if budget == "paper" else "pes")
     if protocol not in PROTOCOLS:
         raise ConfigError(f"protocol must be one of {', '.join(PROTOCOLS)}, got '{protocol}'")
+    if outside is not None and not Path(outside).is_dir():
+        raise ConfigError(f"--outside: no folder '{outside}'")
     use_ray = choose_runner(use_ray, ray_address)
     methods = list(methods) if methods else available_methods()
     specs = trials_for(target, methods, seeds, budget, protocol)
@@ -95,7 +100,8 @@ def reproduce(
             run_sequential(todo, out, view, run_trial)
     finally:
         view.close()
-    report = write_report(out, specs, target, budget, seeds, command, time.time() - start, protocol)
+    seconds = time.time() - start
+    report = write_report(out, specs, target, budget, seeds, command, seconds, protocol, outside)
     return {
         "target": target,
         "budget": budget,
