@@ -31,6 +31,7 @@ class SweepProgress:
     (tqdm's, from the rate of finished trials)."""
 
     def __init__(self, total: int, skipped: int, enabled: bool, desc: str = "sweep") -> None:
+        self.enabled = enabled
         self.running: set[str] = set()
         self.left = total - skipped
         self.bar = tqdm(
@@ -64,15 +65,17 @@ class SweepProgress:
 
 
 Runner = Callable[..., Any]
-"""``runner(spec, out, threads=...)`` runs (or finishes) the trial ``spec`` in ``out``; a
-module-level function, so that Ray pickles it by reference."""
+"""``runner(spec, out, threads=..., progress=...)`` runs (or finishes) the trial ``spec`` in
+``out`` (``progress``: show its training's progress bar); a module-level function, so that Ray
+pickles it by reference."""
 
 
 def run_sequential(specs: list[dict], out: Path, view: SweepProgress, runner: Runner) -> None:
-    """Every trial in this process, one after the other (all torch threads to each)."""
+    """Every trial in this process, one after the other (all torch threads to each), each
+    training's progress bar under the sweep's."""
     for spec in specs:
         view.start(spec["id"])
-        runner(spec, out)
+        runner(spec, out, progress=view.enabled)
         view.finish(spec["id"])
 
 

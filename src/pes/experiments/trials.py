@@ -86,8 +86,9 @@ def evaluations(spec: dict) -> dict[str, int]:
     return out
 
 
-def run_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
-    """Run (or finish) one trial in ``out/trials/<id>``; returns its ``done.json`` contents."""
+def run_trial(spec: dict, out: Path, threads: int = 0, progress: bool = False) -> dict[str, Any]:
+    """Run (or finish) one trial in ``out/trials/<id>``; returns its ``done.json`` contents.
+    ``progress``: show the training's progress bar."""
     folder = Path(out) / "trials" / spec["id"]
     done = folder / "done.json"
     if done.is_file():
@@ -100,7 +101,7 @@ def run_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     if spec["kind"] == "tpnet":
         result = {"table5": run_tpnet(spec, budget, folder)}
     else:
-        result = _run_policy_trial(spec, budget, folder, threads)
+        result = _run_policy_trial(spec, budget, folder, threads, progress)
     record = {
         "spec": spec,
         "commit": source_commit(),
@@ -111,10 +112,12 @@ def run_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     return record
 
 
-def _run_policy_trial(spec: dict, budget: Budget, folder: Path, threads: int) -> dict:
+def _run_policy_trial(
+    spec: dict, budget: Budget, folder: Path, threads: int, progress: bool
+) -> dict:
     train_summary = None
     if spec["kind"] == "train":
-        train_summary = _train(spec, budget, folder, threads)
+        train_summary = _train(spec, budget, folder, threads, progress)
     results = {}
     for name, damaged in evaluations(spec).items():
         path = folder / f"eval_{name}.json"
@@ -147,12 +150,12 @@ def train_config(spec: dict, budget: Budget, threads: int = 0):
     return build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
 
 
-def _train(spec: dict, budget: Budget, folder: Path, threads: int) -> dict:
+def _train(spec: dict, budget: Budget, folder: Path, threads: int, progress: bool) -> dict:
     run = folder / "run"
     if (run / "summary.json").is_file():
         return json.loads((run / "summary.json").read_text())
     cfg = train_config(spec, budget, threads)
-    return train(cfg, run, resume=(run / "checkpoint.pt").is_file(), progress=False)
+    return train(cfg, run, resume=(run / "checkpoint.pt").is_file(), progress=progress)
 
 
 def _policy(spec: dict, folder: Path, cfg):

@@ -141,10 +141,12 @@ def finished(out: Path, spec: dict, env_steps: int) -> dict[str, Any] | None:
     return json.loads(done.read_text()) if done.is_file() else None
 
 
-def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
+def run_tune_trial(
+    spec: dict, out: Path, threads: int = 0, progress: bool = False
+) -> dict[str, Any]:
     """Train trial ``spec`` in ``out/trials/<id>/run`` to ``spec["env_steps"]`` env steps
     (resumed from its checkpoint if one is there) and score it; returns the contents of its
-    ``result-<env_steps>.json``."""
+    ``result-<env_steps>.json``. ``progress``: show the training's progress bar."""
     spec, env_steps = dict(spec), spec["env_steps"]
     del spec["env_steps"]
     record = finished(out, spec, env_steps)
@@ -168,7 +170,7 @@ def run_tune_trial(spec: dict, out: Path, threads: int = 0) -> dict[str, Any]:
     summary_path = run / "summary.json"
     trained = json.loads(summary_path.read_text())["env_steps"] if summary_path.is_file() else 0
     if trained < env_steps:
-        train(cfg, run, resume=(run / "checkpoint.pt").is_file(), progress=False)
+        train(cfg, run, resume=(run / "checkpoint.pt").is_file(), progress=progress)
     train_summary = json.loads(summary_path.read_text())
     env_cfg = eval_config(BUDGETS["quick"])
     policy, _ = load_pursuer_policy(run / "policy.pt", env_cfg)

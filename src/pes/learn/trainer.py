@@ -426,7 +426,7 @@ def train(
                 reward_sum += (reward * alive).sum(-1) / alive.sum(-1).clamp(min=1.0)
                 prog.env_steps += cfg.num_envs
                 if by_steps:
-                    bar.update(cfg.num_envs)
+                    bar.update(min(cfg.num_envs, max(0, total - bar.n)))  # stop at the total
                 done = terminated | truncated
                 if bool(done.any()):
                     idx = torch.nonzero(done).flatten()
