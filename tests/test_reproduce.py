@@ -214,6 +214,8 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path):
         folder = tmp_path / "trials" / trial
         assert (folder / "result-400.json").is_file()
         assert (folder / "result-800.json").is_file() == (steps == 800)
+        curve = (folder / "progress.csv").read_text()
+        assert curve == (folder / "run" / "progress.csv").read_text()
         trained = json.loads((folder / "run" / "summary.json").read_text())["env_steps"]
         assert steps <= trained < steps + 8 * 64  # one run, resumed, not started again
     values = {r["id"]: r["values"] for r in summary["results"]}

@@ -20,9 +20,9 @@ never used in training or in ``pes reproduce``): success rate first, mean reward
 learner gets the same budget: the same trials, halvings, env steps and evaluation.
 
 Each trial runs in ``OUT/trials/<id>/`` (its training run in ``run/``, its score at each budget
-in ``result-<env_steps>.json``), so a search killed at any point resumes where it stopped;
-``OUT/tuning.json`` and ``OUT/README.md`` list every trial's settings and scores with the
-command.
+in ``result-<env_steps>.json``, its run's ``progress.csv`` and ``config.yaml`` copied beside
+them), so a search killed at any point resumes where it stopped; ``OUT/tuning.json`` and
+``OUT/README.md`` list every trial's settings and scores with the command.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import math
 import random
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -271,7 +272,8 @@ def tune(
 def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: float) -> dict:
     """``tuning.json`` and ``README.md`` of the scored trials: each trial's score at every budget
     it reached, the trials ranked by the furthest budget they reached, then by their score
-    there."""
+    there; each scored trial's learning curve and settings (its run's ``progress.csv`` and
+    ``config.yaml``) beside its scores, where the run is (the run folder is not kept)."""
     first = specs[0]
     budgets = first["budgets"]
     results = []
@@ -279,6 +281,10 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         scores = {b: r for b in budgets if (r := finished(out, spec, b)) is not None}
         if not scores:
             continue
+        folder = out / "trials" / spec["id"]
+        for name in ("progress.csv", "config.yaml"):
+            if (folder / "run" / name).is_file():
+                shutil.copyfile(folder / "run" / name, folder / name)
         last = max(scores)
         record = scores[last]
         results.append(
@@ -290,6 +296,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
                 "success_rate": record["eval"]["success_rate"],
                 "mean_steps": record["eval"]["mean_steps"],
                 "mean_crashes": record["eval"]["mean_crashes"],
+                "lost_rate": record["eval"]["lost_rate"],
+                "timeout_rate": record["eval"]["timeout_rate"],
                 "train_episodes": record["train"]["episodes"],
                 "updates": record["train"]["updates"],
                 "cpu_s": record["train"]["cpu_s"],
@@ -344,8 +352,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "",
         f"Command: `{command}`" if command else "",
         "",
-        f"| trial | settings | {heads} | steps | crashes | CPU hours |",
-        "| --- | --- | " + "--- | " * len(budgets) + "--- | --- | --- |",
+        f"| trial | settings | {heads} | steps | crashes | lost | step limit | CPU hours |",
+        "| --- | --- | " + "--- | " * len(budgets) + "--- | --- | --- | --- | --- |",
     ]
     for r in results:
         settings = ", ".join(f"{k}={v}" for k, v in r["values"].items()) or "(quick preset)"
@@ -358,12 +366,15 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         )
         lines.append(
             f"| {r['id']} | {settings} | {cells} | {r['mean_steps']:.0f} | "
-            f"{r['mean_crashes']:.2f} | {r['cpu_s'] / 3600:.2f} |"
+            f"{r['mean_crashes']:.2f} | {100 * r['lost_rate']:.1f} % | "
+            f"{100 * r['timeout_rate']:.1f} % | {r['cpu_s'] / 3600:.2f} |"
         )
     lines += [
         "",
-        "Each budget's cell: success rate (mean reward per step of the paper's reward); steps and "
-        "crashes: mean per episode at the trial's furthest budget; CPU hours: its training's.",
+        "Each budget's cell: success rate (mean reward per step of the paper's reward). At the "
+        "trial's furthest budget: steps and crashes, mean per episode; lost, step limit: the "
+        "episodes that failed because too few pursuers were left or at the step limit; CPU "
+        "hours: its training's. `trials/<id>/progress.csv` is each trial's learning curve.",
     ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}
