@@ -184,6 +184,8 @@ def test_bench(capsys):
         (["eval", "--policy", "pid-pf", "--device", "cuda:9"], "cuda"),
         # a trained policy is checked before its networks are moved to the device
         (["eval", "--policy", "cbc-tp", "--device", "cuda"], "cuda"),
+        (["tune", "--algo", "ppo", "--preset", "tiny", "--no-ray"], "give --env-steps"),
+        (["tune", "--algo", "ppo", "--trials", "2", "--halvings", "2"], "halvings must be 0 to 1"),
     ],
 )
 def test_user_mistakes(argv, message, capsys):
@@ -195,6 +197,19 @@ def test_user_mistakes(argv, message, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and message in err and len(err.splitlines()) == 1
+
+
+def test_tune_on_the_tiny_preset(tmp_path, capsys):
+    """pes tune end to end: two trials to half the budget, the better one on to all of it."""
+    argv = ["tune", "--algo", "ppo", "--preset", "tiny", "--trials", "2", "--halvings", "1"]
+    argv += ["--env-steps", "800", "--eval-episodes", "2", "--no-ray", "--out", str(tmp_path)]
+    assert main([*argv, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["complete"] and summary["budgets"] == [400, 800]
+    assert [r["env_steps"] for r in summary["results"]] == [800, 400]
+    assert summary["best"] == summary["results"][0]["values"]
+    assert main(argv) == 0  # finds everything done
+    assert "2 of 2 trials scored; best: " in capsys.readouterr().out
 
 
 def test_mistakes_through_the_real_command():

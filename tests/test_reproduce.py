@@ -132,6 +132,13 @@ def test_interrupted_trial_resumes_without_retraining(sweep):
     assert summary["ran"] == 1 and summary["skipped"] == 2
     assert (trial / "done.json").is_file() and (trial / "eval_table4.json").is_file()
     assert (trial / "run" / "policy.pt").stat().st_mtime_ns == policy_time
+    # Killed during training (Ctrl-C writes a summary that says so): the training goes on.
+    run_summary = trial / "run" / "summary.json"
+    record = json.loads(run_summary.read_text())
+    run_summary.write_text(json.dumps({**record, "stopped_by": "interrupted"}))
+    (trial / "done.json").unlink()
+    reproduce("table4", budget="tiny", seeds=1, out=out, methods=METHODS, use_ray=False)
+    assert json.loads(run_summary.read_text())["stopped_by"] == "episodes"
 
 
 @pytest.mark.slow
@@ -179,30 +186,49 @@ def test_user_mistakes(tmp_path, capsys):
     assert "unknown method 'nope'" in capsys.readouterr().err
 
 
-def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure():
+def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
     """Without captures, the swarm lost to crashes in few steps does not outrank the one that
-    kept up with the evader to the step limit; captures always come first."""
-    from pes.experiments.tune import score
+    kept up with the evader to the step limit; captures always come first; the report ranks
+    trials of equal success by their reward."""
+    from pes.experiments.tune import make_tune_trials, score, write_json, write_tuning_report
 
     lost_fast = {"success_rate": 0.0, "mean_steps": 163.0, "mean_reward": -0.9}
     kept_up = {"success_rate": 0.0, "mean_steps": 484.0, "mean_reward": -0.3}
     one_capture = {"success_rate": 0.005, "mean_steps": 480.0, "mean_reward": -5.0}
     assert score(kept_up) > score(lost_fast)
     assert score(one_capture) > score(kept_up)
+    specs = make_tune_trials("ppo", 2, 800, 0, 2, "pes", 0, "tiny")
+    for spec, result in zip(specs, (lost_fast, kept_up), strict=True):
+        folder = tmp_path / "trials" / spec["id"]
+        folder.mkdir(parents=True)
+        train = {"episodes": 8, "env_steps": 800, "updates": 1, "cpu_s": 1.0}
+        failures = {"mean_crashes": 1.0, "lost_rate": 0.5, "timeout_rate": 0.5}
+        record = {"spec": spec, "train": train, "eval": {**result, **failures}}
+        write_json(folder / "result-800.json", record)
+    summary = write_tuning_report(tmp_path, specs, "", 0.0)
+    assert [r["id"] for r in summary["results"]] == ["t01", "t00"]
+    assert summary["complete"] and summary["best"] == specs[1]["values"]
 
 
-def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path):
+def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, monkeypatch):
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial
     t00 is the preset, the others sampled settings; a second call finds everything done; another
     budget is refused; --report-only reports what is scored and runs nothing."""
+    import pes.experiments.tune as tune_module
     from pes.errors import ConfigError
     from pes.experiments.tune import score, tune
 
     kwargs = dict(
         trials=3, env_steps=800, halvings=1, eval_episodes=2, preset="tiny", use_ray=False
     )
+    resumed = []
+    real_train = tune_module.train
+    monkeypatch.setattr(
+        tune_module, "train", lambda *a, **k: resumed.append(k["resume"]) or real_train(*a, **k)
+    )
     summary = tune("ppo", out=tmp_path, progress=False, **kwargs)
+    assert resumed == [False, False, False, True, True]  # the second round goes on
     assert summary["budgets"] == [400, 800] and summary["complete"]
     assert summary["scored"] == 3
     reached = {r["id"]: r["env_steps"] for r in summary["results"]}
@@ -217,7 +243,7 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path):
         curve = (folder / "progress.csv").read_text()
         assert curve == (folder / "run" / "progress.csv").read_text()
         trained = json.loads((folder / "run" / "summary.json").read_text())["env_steps"]
-        assert steps <= trained < steps + 8 * 64  # one run, resumed, not started again
+        assert steps <= trained < steps + 8  # stopped within one step of 8 environments
     values = {r["id"]: r["values"] for r in summary["results"]}
     assert values["t00"] == {} and set(values["t01"]) == {
         "lr_actor",
@@ -231,6 +257,10 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path):
     assert again["results"] == summary["results"]
     with pytest.raises(ConfigError, match="other settings"):
         tune("ppo", out=tmp_path, progress=False, **dict(kwargs, env_steps=1600))
+    (tmp_path / "trials" / "t00" / "result.json").write_text("{}")  # a CPU-minute trial's
+    with pytest.raises(ConfigError, match="budgeted in CPU minutes"):
+        tune("ppo", out=tmp_path, progress=False, **kwargs)
+    (tmp_path / "trials" / "t00" / "result.json").unlink()
     # --report-only: a longer search reports the scored trials and runs none.
     partial = tune("ppo", out=tmp_path, progress=False, report_only=True, **dict(kwargs, trials=4))
     assert partial["scored"] == 3 and partial["trials"] == 4 and not partial["complete"]

@@ -83,16 +83,6 @@ def _positive(text: str) -> int:
     return value
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {value}")
-    return value
-
-
 def _non_negative(text: str) -> int:
     try:
         value = int(text)
@@ -508,6 +498,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         if sys.argv[1:2] == ["tune"]
         else "",
         report_only=args.report_only,
+        preset=args.preset,
     )
     if args.json:
         _print_json(summary)
@@ -814,14 +805,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--algo", required=True, choices=[a for a in ALGOS if a != "evader-ddpg"])
     p.add_argument("--protocol", choices=["pes", "paper"], default="pes", help="training protocol")
+    p.add_argument(
+        "--preset",
+        choices=["quick", "paper", "tiny"],
+        default="quick",
+        help="what each trial trains (default: quick; tiny: a seconds-long check)",
+    )
     p.add_argument("--trials", type=_positive, default=8, help="trials (default: 8)")
     p.add_argument(
         "--env-steps",
         type=_positive,
         default=0,
         metavar="N",
-        help="env steps of the trials that train longest (default: the quick preset's budget, "
-        "2,000,000)",
+        help="env steps of the trials that train longest (default: the preset's budget, 2,000,000 "
+        "for quick; the other presets need it)",
     )
     p.add_argument(
         "--halvings",

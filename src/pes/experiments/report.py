@@ -403,10 +403,14 @@ def write_report(
         "hardware": f"{machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']}",
     }
     written = []
-    tables = {"table4": table4, "table5": table5, "table6": table6}
-    for name, fn in tables.items():
+    tables = {
+        "table4": lambda: table4(specs, done, meta, references),
+        "table5": lambda: table5(specs, done, meta),
+        "table6": lambda: table6(specs, done, meta),
+    }
+    for name, make in tables.items():
         if target in (name, "all") or (target == "figures" and name == "table4"):
-            text = fn(specs, done, meta, references) if name == "table4" else fn(specs, done, meta)
+            text = make()
             if text is not None:
                 (out / f"{name}.md").write_text(text)
                 written.append(f"{name}.md")

@@ -153,7 +153,9 @@ def train_config(spec: dict, budget: Budget, threads: int = 0):
 def _train(spec: dict, budget: Budget, folder: Path, threads: int, progress: bool) -> dict:
     run = folder / "run"
     if (run / "summary.json").is_file():
-        return json.loads((run / "summary.json").read_text())
+        summary = json.loads((run / "summary.json").read_text())
+        if summary["stopped_by"] != "interrupted":  # else the checkpoint's run goes on
+            return summary
     cfg = train_config(spec, budget, threads)
     return train(cfg, run, resume=(run / "checkpoint.pt").is_file(), progress=progress)
 

@@ -128,17 +128,29 @@ def result_path(out: Path, spec: dict, env_steps: int) -> Path:
     return Path(out) / "trials" / spec["id"] / f"result-{env_steps}.json"
 
 
-def finished(out: Path, spec: dict, env_steps: int) -> dict[str, Any] | None:
-    """The score of trial ``spec`` at ``env_steps`` in ``out`` if it has one (None if not); a
-    trial of the same id run with other settings is a one-line error."""
-    done = result_path(out, spec, env_steps)
-    for path in sorted(done.parent.glob("result-*.json")):
+def check_trial(out: Path, spec: dict) -> None:
+    """Refuse (a one-line error) a trial folder that holds a trial of other settings: its
+    ``spec.json`` (written before its first training) or a score's, or the ``result.json`` of a
+    search budgeted in CPU minutes."""
+    folder = Path(out) / "trials" / spec["id"]
+    if (folder / "result.json").is_file():
+        raise ConfigError(
+            f"'{folder}' holds a trial of a search budgeted in CPU minutes; choose another --out"
+        )
+    for path in sorted([*folder.glob("spec.json"), *folder.glob("result-*.json")]):
         record = json.loads(path.read_text())
-        if record["spec"] != spec:
+        held = record.get("spec", record)
+        if held != spec:
             raise ConfigError(
-                f"'{done.parent}' holds a trial run with other settings ({record['spec']}); "
-                "choose another --out"
+                f"'{folder}' holds a trial run with other settings ({held}); choose another --out"
             )
+
+
+def finished(out: Path, spec: dict, env_steps: int) -> dict[str, Any] | None:
+    """The score of trial ``spec`` at ``env_steps`` in ``out`` if it has one (None if not)
+    (:func:`check_trial` first)."""
+    check_trial(out, spec)
+    done = result_path(out, spec, env_steps)
     return json.loads(done.read_text()) if done.is_file() else None
 
 
@@ -155,6 +167,8 @@ def run_tune_trial(
         return record
     folder = Path(out) / "trials" / spec["id"]
     folder.mkdir(parents=True, exist_ok=True)
+    if not (folder / "spec.json").is_file():
+        write_json(folder / "spec.json", spec)
     values = {
         **spec["values"],
         "seed": spec["seed"],
@@ -203,24 +217,32 @@ def score(result: dict[str, Any]) -> float:
 
 def survivors(records: list[dict], keep: int) -> list[str]:
     """The ids of the ``keep`` best-scored records (ties: the lower id)."""
-    ranked = sorted(records, key=lambda r: (-r["score"], r["spec"]["id"]))
+    ranked = sorted(records, key=lambda r: (-score(r["eval"]), r["spec"]["id"]))
     return [r["spec"]["id"] for r in ranked[:keep]]
 
 
-def pending(out: Path, specs: list[dict]) -> tuple[int, list[dict]] | None:
-    """The round of successive halving still to run: its env steps and the trials that have
-    no score there yet (None once the search is complete). Round k's trials are the
-    ``ceil(trials / 2**k)`` best of round k - 1."""
-    alive = specs
+def rounds(out: Path, specs: list[dict]) -> list[tuple[int, list[dict], dict[str, dict]]]:
+    """The rounds of successive halving so far, each as its env steps, its trials and their
+    scores there by id. Round k's trials are the ``ceil(trials / 2**k)`` best of round k - 1;
+    a round is listed once the one before it is complete."""
     budgets = specs[0]["budgets"]
+    alive, found = specs, []
     for k, budget in enumerate(budgets):
-        scored = [r for s in alive if (r := finished(out, s, budget)) is not None]
-        if len(scored) < len(alive):
-            return budget, [s for s in alive if finished(out, s, budget) is None]
-        if k < len(budgets) - 1:
-            keep = set(survivors(scored, math.ceil(len(specs) / 2 ** (k + 1))))
-            alive = [s for s in alive if s["id"] in keep]
-    return None
+        scored = {s["id"]: r for s in alive if (r := finished(out, s, budget)) is not None}
+        found.append((budget, alive, scored))
+        if len(scored) < len(alive) or k == len(budgets) - 1:
+            break
+        keep = set(survivors(list(scored.values()), math.ceil(len(specs) / 2 ** (k + 1))))
+        alive = [s for s in alive if s["id"] in keep]
+    return found
+
+
+def pending(out: Path, specs: list[dict]) -> tuple[int, list[dict]] | None:
+    """The round still to run: its env steps and its trials without a score there yet (None
+    once the search is complete)."""
+    budget, alive, scored = rounds(out, specs)[-1]
+    todo = [s for s in alive if s["id"] not in scored]
+    return (budget, todo) if todo else None
 
 
 def tune(
@@ -270,15 +292,17 @@ def tune(
 
 
 def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: float) -> dict:
-    """``tuning.json`` and ``README.md`` of the scored trials: each trial's score at every budget
-    it reached, the trials ranked by the furthest budget they reached, then by their score
-    there; each scored trial's learning curve and settings (its run's ``progress.csv`` and
-    ``config.yaml``) beside its scores, where the run is (the run folder is not kept)."""
+    """``tuning.json`` and ``README.md`` of the scored trials: each trial's score at every round
+    of the search it reached, the trials ranked by the furthest round they reached, then by
+    their score there; each scored trial's learning curve and settings (its run's
+    ``progress.csv`` and ``config.yaml``) beside its scores, where the run is (the run folder is
+    not kept)."""
     first = specs[0]
     budgets = first["budgets"]
+    found = rounds(out, specs)
     results = []
     for spec in specs:
-        scores = {b: r for b in budgets if (r := finished(out, spec, b)) is not None}
+        scores = {b: scored[spec["id"]] for b, _, scored in found if spec["id"] in scored}
         if not scores:
             continue
         folder = out / "trials" / spec["id"]
@@ -292,7 +316,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
                 "id": spec["id"],
                 "values": spec["values"],
                 "env_steps": last,
-                "score": round(score(record["eval"]), 5),
+                "score": score(record["eval"]),
                 "success_rate": record["eval"]["success_rate"],
                 "mean_steps": record["eval"]["mean_steps"],
                 "mean_crashes": record["eval"]["mean_crashes"],
@@ -312,6 +336,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
             }
         )
     results.sort(key=lambda r: (-r["env_steps"], -r["score"], r["id"]))
+    for r in results:
+        r["score"] = round(r["score"], 8)  # the reward term is 1e-5 of it
     finals = math.ceil(len(specs) / 2 ** (len(budgets) - 1))
     complete = pending(out, specs) is None
     summary = {
@@ -337,15 +363,15 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "",
         f"{len(results)} of {len(specs)} trials scored"
         + ("; the search is complete." if complete else "; the search is not finished.")
-        + f" Successive halving in env steps: every trial trains the quick preset with its "
-        f"settings to {budgets[0]:,} env steps on one torch thread, "
+        + f" Every trial trains the {first['preset']} preset with its settings on one torch "
+        f"thread to {budgets[0]:,} env steps"
         + (
-            "the better half of them goes on to twice that, and so on up to "
-            f"{budgets[-1]:,} ({finals} trials). "
+            "; by successive halving, the better half of them goes on to twice that, and so on "
+            f"up to {budgets[-1]:,} env steps ({finals} trials)"
             if len(budgets) > 1
             else ""
         )
-        + f"Each score is on the same {first['eval_episodes']} held-out episodes (disturbance "
+        + f". Each score is on the same {first['eval_episodes']} held-out episodes (disturbance "
         "on, crashes disable, the default evader): success rate, then mean reward. Trial t00 is "
         "the quick preset itself. Trials are ranked by the furthest budget they reached, then "
         "by their score there.",

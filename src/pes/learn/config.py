@@ -122,8 +122,8 @@ class TrainConfig:
     """Stop after this many minutes of training (0 = no limit); a checkpoint is written."""
     cpu_limit: float = 0.0
     """Stop after this many minutes of this process's CPU time (all its threads; 0 = no
-    limit): unlike ``time_limit``, the same work whatever else shares the machine's cores
-    (``pes tune``'s trial budget), though not on another CPU (docs/training.md)."""
+    limit): unlike ``time_limit``, the same work whatever else shares the machine's cores,
+    though not on another CPU (docs/training.md)."""
     env_steps: int = 0
     """Stop after this many environment steps (one control step of one environment; 0 = no
     limit): a budget of experience that is the same on every machine, unlike the time limits
