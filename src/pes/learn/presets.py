@@ -14,8 +14,8 @@ QUICK_RUN: dict[str, Any] = dict(
 method and on every machine: 2,000,000 env steps (one control step of one environment each;
 the episodes do not bind). CBC-TP Net's preset captured 88-92 % of 1000 evaluation episodes
 after about 2 M env steps in research/n_step_targets.md (runs y3, v1). Its hours depend on the
-method and the CPU: CBC-TP Net's from about 0.9 (the host of run y3) to about 2 (2026-12-02) on
-one thread (docs/training.md)."""
+method and the CPU: CBC-TP Net's from about 0.9 (the host of run y3) to about 2.5 (2026-12-02)
+on one thread (docs/reproduce.md)."""
 
 TINY_RUN: dict[str, Any] = dict(
     compile_env=False,  # compiling the step costs more than a tiny run saves by it
