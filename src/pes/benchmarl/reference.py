@@ -38,11 +38,11 @@ from benchmarl.experiment import Experiment, ExperimentConfig
 from benchmarl.experiment.callback import Callback
 from benchmarl.models import MlpConfig
 
-from pes.algos import build_train_config
 from pes.benchmarl import PESTask
 from pes.benchmarl.policy import load_benchmarl_policy
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, EVAL_SEED, eval_config, write_json
+from pes.learn.presets import QUICK_RUN
 
 ALGORITHMS = {"mappo": "Mappo", "ippo": "Ippo", "maddpg": "Maddpg", "masac": "Masac"}
 """``--algorithm`` name -> BenchMARL's config class prefix."""
@@ -50,7 +50,7 @@ ALGORITHMS = {"mappo": "Mappo", "ippo": "Ippo", "maddpg": "Maddpg", "masac": "Ma
 
 def quick_frames() -> int:
     """The quick presets' budget of env steps (the same for every PES learner)."""
-    return build_train_config("maddpg", "quick").env_steps
+    return QUICK_RUN["env_steps"]
 
 
 class CpuClock(Callback):

@@ -39,7 +39,7 @@ from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, learner_class, t
 from pes.algos.policy import load_pursuer_policy
 from pes.errors import ConfigError
 from pes.evaluate import evaluate
-from pes.experiments.budgets import BUDGETS, eval_config, write_json
+from pes.experiments.budgets import BUDGETS, EVAL_ENVS, eval_config, write_json
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
 
 TUNE_EVAL_SEED = 3_000_000
@@ -191,7 +191,7 @@ def run_tune_trial(
     policy, _ = load_pursuer_policy(run / "policy.pt", env_cfg)
     episodes = spec["eval_episodes"]
     result = evaluate(
-        policy, env_cfg, episodes, num_envs=min(episodes, 250), seed=spec["eval_seed"]
+        policy, env_cfg, episodes, num_envs=min(episodes, EVAL_ENVS), seed=spec["eval_seed"]
     ).summary()
     record = {
         "spec": spec,
@@ -237,10 +237,10 @@ def rounds(out: Path, specs: list[dict]) -> list[tuple[int, list[dict], dict[str
     return found
 
 
-def pending(out: Path, specs: list[dict]) -> tuple[int, list[dict]] | None:
-    """The round still to run: its env steps and its trials without a score there yet (None
-    once the search is complete)."""
-    budget, alive, scored = rounds(out, specs)[-1]
+def pending(found: list[tuple[int, list[dict], dict[str, dict]]]) -> tuple[int, list[dict]] | None:
+    """The round still to run, from :func:`rounds`: its env steps and its trials without a
+    score there yet (None once the search is complete)."""
+    budget, alive, scored = found[-1]
     todo = [s for s in alive if s["id"] not in scored]
     return (budget, todo) if todo else None
 
@@ -277,7 +277,7 @@ def tune(
     out.mkdir(parents=True, exist_ok=True)
     use_ray = choose_runner(use_ray, ray_address)
     start = time.time()
-    while not report_only and (round_ := pending(out, specs)) is not None:
+    while not report_only and (round_ := pending(rounds(out, specs))) is not None:
         budget, todo = round_
         view = SweepProgress(len(todo), 0, progress, f"tune {budget:,} env steps")
         batch = [{**s, "env_steps": budget} for s in todo]
@@ -339,7 +339,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
     for r in results:
         r["score"] = round(r["score"], 8)  # the reward term is 1e-5 of it
     finals = math.ceil(len(specs) / 2 ** (len(budgets) - 1))
-    complete = pending(out, specs) is None
+    complete = pending(found) is None
     summary = {
         "algo": first["algo"],
         "protocol": first["protocol"],
