@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -164,6 +165,27 @@ def test_the_quick_presets_of_table4_share_one_protocol_and_one_run():
         assert cfg.env_steps == configs[0].env_steps > 0
         assert cfg.time_limit == cfg.cpu_limit == 0.0
         assert cfg.episodes >= cfg.env_steps  # an episode is one env step or more
+
+
+def test_the_quick_presets_hold_what_their_searches_found():
+    """A learner whose equal search (``results/tuning/<algo>``, ``pes tune``) is complete trains
+    the search's best settings in its quick preset; one whose search is not finished keeps the
+    values its trial t00 began from, so that no preset changes under a running search."""
+    root = Path(__file__).resolve().parents[1] / "results" / "tuning"
+    searched = []
+    for algo in (*TABLE4_ALGOS, "cbc"):
+        report = root / algo / "tuning.json"
+        if not report.is_file():
+            continue
+        summary = json.loads(report.read_text())
+        first = {r["id"]: r["values"] for r in summary["results"]}.get("t00")
+        want = summary["best"] if summary["complete"] else first
+        if want is None:
+            continue
+        preset = build_train_config(algo, "quick").learner
+        assert {key: getattr(preset, key) for key in want} == want, algo
+        searched.append(algo)
+    assert {"cbc-tp", "maddpg"} <= set(searched)
 
 
 def test_a_key_the_method_does_not_read_is_an_error_naming_the_method():

@@ -213,7 +213,7 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
 def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, monkeypatch):
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial
-    t00 is the preset, the others sampled settings; a second call finds everything done; another
+    t00 holds the preset's own values of the search space, the others sampled settings; a second call finds everything done; another
     budget is refused; --report-only reports what is scored and runs nothing."""
     import pes.experiments.tune as tune_module
     from pes.errors import ConfigError
@@ -245,12 +245,10 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
         trained = json.loads((folder / "run" / "summary.json").read_text())["env_steps"]
         assert steps <= trained < steps + 8  # stopped within one step of 8 environments
     values = {r["id"]: r["values"] for r in summary["results"]}
-    assert values["t00"] == {} and set(values["t01"]) == {
-        "lr_actor",
-        "lr_critic",
-        "ent_coef",
-        "hidden",
-    }
+    space = {"lr_actor", "lr_critic", "ent_coef", "hidden"}
+    assert set(values["t00"]) == set(values["t01"]) == space
+    preset = pes.algos.build_train_config("ppo", "tiny", {}, protocol="pes").learner
+    assert values["t00"] == {key: getattr(preset, key) for key in space}
     assert summary["best"] == summary["results"][0]["values"]
     assert "t01" in (tmp_path / "README.md").read_text()
     again = tune("ppo", out=tmp_path, progress=False, **kwargs)

@@ -4,7 +4,8 @@
 
 A search samples ``trials`` settings of the learner's :attr:`~pes.learn.learner.Learner.
 TUNE_SPACE` (two to four keys: learning rates, exploration or entropy, batch size, network
-width) by random search from a fixed seed; trial 0 is the quick preset itself. Each trial trains
+width) by random search from a fixed seed; trial 0 is the preset itself (its values of those keys,
+written out, so that a trial's settings stay what they were when the preset later changes). Each trial trains
 the quick preset with its settings under the chosen protocol, on one torch thread, and the
 budget is experience, not time: ``env_steps`` control steps of one environment (the quick
 preset's budget by default), the same work on every machine and beside any other job.
@@ -78,9 +79,9 @@ def make_tune_trials(
     seed: int,
     preset: str = "quick",
 ) -> list[dict]:
-    """The trial specs of a search (JSON-friendly dicts): trial 0 the quick preset, the others
-    random settings of the learner's search space, drawn from ``seed``; ``budgets`` lists the
-    env steps of each round (:func:`rung_budgets`)."""
+    """The trial specs of a search (JSON-friendly dicts): trial 0 the preset's own values of the
+    learner's search space, the others random settings of it drawn from ``seed``; ``budgets``
+    lists the env steps of each round (:func:`rung_budgets`)."""
     cls = learner_class(algo)
     if algo not in PURSUER_ALGOS or not cls.TUNE_SPACE:
         raise ConfigError(f"pes tune takes the pursuer learners, not {algo}")
@@ -93,9 +94,13 @@ def make_tune_trials(
     if env_steps >> halvings < 1:
         raise ConfigError(f"env_steps {env_steps} is too small for {halvings} halvings")
     rng = random.Random(f"{algo}-{seed}")
+    base = build_train_config(algo, preset, {}, protocol=protocol).learner
     specs = []
     for k in range(trials):
-        values = {} if k == 0 else sample(cls.TUNE_SPACE, rng)
+        if k == 0:
+            values = {key: getattr(base, key) for key in cls.TUNE_SPACE}
+        else:
+            values = sample(cls.TUNE_SPACE, rng)
         build_train_config(algo, preset, dict(values), protocol=protocol)  # checks the values
         specs.append(
             {
@@ -373,7 +378,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         )
         + f". Each score is on the same {first['eval_episodes']} held-out episodes (disturbance "
         "on, crashes disable, the default evader): success rate, then mean reward. Trial t00 is "
-        "the quick preset itself. Trials are ranked by the furthest budget they reached, then "
+        f"the {first['preset']} preset as it was when the search began. Trials are ranked by the furthest budget they reached, then "
         "by their score there.",
         "",
         f"Command: `{command}`" if command else "",
@@ -382,7 +387,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "| --- | --- | " + "--- | " * len(budgets) + "--- | --- | --- | --- | --- |",
     ]
     for r in results:
-        settings = ", ".join(f"{k}={v}" for k, v in r["values"].items()) or "(quick preset)"
+        settings = ", ".join(f"{k}={v}" for k, v in r["values"].items())
         cells = " | ".join(
             f"{100 * r['by_budget'][str(b)]['success_rate']:.1f} % "
             f"({r['by_budget'][str(b)]['mean_reward']:.3f})"
