@@ -13,7 +13,8 @@ What is measured, each as a fresh ``pes eval`` process, exactly as a user runs i
   when two jobs share the machine;
 * the time from ``import pes`` to the first step of ``pes.make_env()`` in a fresh process with an
   empty kernel cache (``NUMBA_CACHE_DIR`` pointed at a new folder), as on a new machine, and
-  again with the cache that first run left.
+  again with the cache that first run left; and, stepping on, when the kernels compiled in the
+  background begin to serve.
 
 The load average before each run is recorded: other work on the machine slows every figure.
 Progress goes to stderr; the JSON object to stdout and to ``--out``.
@@ -30,11 +31,22 @@ import tempfile
 import time
 from pathlib import Path
 
-FIRST_STEP = (
-    "import time; t = time.perf_counter(); import pes, torch; "
-    "env = pes.make_env(); env.reset(seed=0); "
-    "env.step(torch.zeros(1, env.num_pursuers, 2)); print(time.perf_counter() - t)"
-)
+FIRST_STEP = """
+import json, time
+t = time.perf_counter()
+import pes, torch
+from pes.sim import kernels
+env = pes.make_env()
+env.reset(seed=0)
+action = torch.zeros(1, env.num_pursuers, 2)
+env.step(action)
+first, compiled, steps = time.perf_counter() - t, kernels._step is not None, 1
+while kernels._step is None and kernels._child is not None:  # the background compilation
+    env.step(action)
+    steps += 1
+print(json.dumps({"first_step_s": round(first, 2), "kernels_at_first_step": compiled,
+                  "kernels_after_s": round(time.perf_counter() - t, 2), "steps_before": steps}))
+"""
 
 
 def log(text: str) -> None:
@@ -62,13 +74,15 @@ def run_eval(episodes: int, threads: int) -> dict:
     }
 
 
-def first_step(cache_dir: str) -> float:
-    """Seconds from ``import pes`` to the first step in a fresh process."""
+def first_step(cache_dir: str) -> dict:
+    """A fresh process from ``import pes``: seconds to its first step, whether that step ran the
+    kernels, seconds until they serve (compiled aside while the steps run the torch code) and
+    the steps taken until then."""
     env = {**os.environ, "NUMBA_CACHE_DIR": cache_dir}
     done = subprocess.run(
         [sys.executable, "-c", FIRST_STEP], capture_output=True, text=True, check=True, env=env
     )
-    return round(float(done.stdout.strip().splitlines()[-1]), 2)
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def main() -> int:
@@ -112,7 +126,7 @@ def main() -> int:
             if busy is not None:
                 busy.kill()
     figures = {(r["success_rate"], r["mean_steps"]) for r in report["runs"]}
-    report["same_figures_in_every_run"] = len(figures) == 1
+    report["same_figures_in_every_run"] = len(figures) == 1 if report["runs"] else None
     text = json.dumps(report, indent=2)
     print(text)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

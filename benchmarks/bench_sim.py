@@ -92,6 +92,9 @@ def mpe2_timer() -> Timer:
 
 def pettingzoo_timer(compile: bool = False) -> tuple[Timer, float]:
     from pes.pettingzoo import parallel_env
+    from pes.sim import kernels
+
+    kernels.wait()  # the steady speed: no background compilation during the timed window
 
     env = parallel_env(compile=compile)
     env.reset(seed=0)

@@ -6,6 +6,16 @@ import pytest
 import torch
 
 import pes
+from pes.sim import kernels
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _kernels_loaded():
+    """The compiled step from the first test on (compiled here if none is cached): a background
+    compilation finishing mid-session would switch later steps from the torch code to the
+    kernels, and tests that compare two runs would compare two paths."""
+    kernels.wait()
+    yield
 
 
 @pytest.fixture(autouse=True)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import pytest
 import torch
 
@@ -24,6 +28,50 @@ def test_kernel_is_used_on_the_cpu():
     assert kernels.available(torch.zeros(2))
     assert not kernels.available(torch.zeros(2, dtype=torch.float64))
     assert not kernels.available(torch.zeros(2, requires_grad=True))
+
+
+FIRST_RUN = """
+import time, torch, pes
+from pes.sim import kernels
+env = pes.make_env(num_envs=2, seed=0)
+env.reset()
+env.step(torch.zeros(2, 5, 2))
+print("torch first:", kernels._step is None, kernels._child is not None)
+kernels._child.wait()  # the background compilation
+deadline = time.monotonic() + 60  # the steps look at it every half second
+while kernels._step is None and time.monotonic() < deadline:
+    env.step(torch.zeros(2, 5, 2))
+print("switched:", kernels._step is not None, kernels.ready_marker().is_file())
+"""
+
+LATER_RUN = """
+import torch, pes
+from pes.sim import kernels
+env = pes.make_env(num_envs=2, seed=0)
+env.reset()
+print("kernels first:", kernels._step is not None)
+"""
+
+
+def test_a_machine_without_compiled_kernels_steps_at_once_and_compiles_them_aside(tmp_path):
+    """With no compiled kernels (an empty Numba cache, as on a new machine) the first step does
+    not wait for a compilation: it runs the torch code while a background process compiles the
+    kernels, and the steps switch to them when it is done; the next process loads them from
+    the cache before its first step."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+
+    def run(script: str) -> str:
+        done = subprocess.run(
+            [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=900
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done.stdout
+
+    assert not list(tmp_path.glob("pes-kernels-*.ready"))
+    assert "torch first: True True" in (first := run(FIRST_RUN)), first
+    assert "switched: True True" in first
+    assert len(list(tmp_path.glob("pes-kernels-*.ready"))) == 1
+    assert "kernels first: True" in run(LATER_RUN)
 
 
 def _same(a: torch.Tensor, b: torch.Tensor) -> bool:

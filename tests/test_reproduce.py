@@ -213,8 +213,9 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
 def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, monkeypatch):
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial
-    t00 holds the preset's own values of the search space, the others sampled settings; a second call finds everything done; another
-    budget is refused; --report-only reports what is scored and runs nothing."""
+    t00 holds the preset's own values of the search space, the others sampled settings; a
+    second call finds everything done; another budget is refused; --report-only reports what is
+    scored and runs nothing."""
     import pes.experiments.tune as tune_module
     from pes.errors import ConfigError
     from pes.experiments.tune import score, tune

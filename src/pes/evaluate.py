@@ -115,7 +115,9 @@ def evaluate(
     if episodes < 1:
         raise ConfigError(f"episodes must be at least 1, got {episodes}")
     num_envs = max(1, min(num_envs, episodes))
-    env = make_env(config, num_envs=num_envs, device=device, seed=seed, compile=compile)
+    env = make_env(
+        config, num_envs=num_envs, device=device, seed=seed, compile=compile, wait_kernels=True
+    )
     quota = episode_quota(episodes, num_envs)
     finished = torch.zeros(num_envs, dtype=torch.long)
     slot = {"success": [], "steps": [], "reward": [], "crashes": [], "outcome": []}

@@ -116,7 +116,13 @@ class PESTorchRLEnv(EnvBase):
         check_actions: bool = True,
     ) -> None:
         sim = make_env(
-            config, num_envs, device, seed, compile=sim_compile, check_actions=check_actions
+            config,
+            num_envs,
+            device,
+            seed,
+            compile=sim_compile,
+            check_actions=check_actions,
+            wait_kernels=True,  # every step of a training on the same path
         )
         if sim.config.evader_policy == "external":
             raise ConfigError(
@@ -334,6 +340,7 @@ class PESTorchRLEnv(EnvBase):
                 self._sim_seed,
                 compile=self._sim_compile,
                 check_actions=old.check_actions,
+                wait_kernels=True,
             )
             if old.state is not None:
                 self.sim.set_state(old.state)

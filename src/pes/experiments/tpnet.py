@@ -38,7 +38,7 @@ def collect(policy, config, episodes: int, seed: int) -> list[torch.Tensor]:
     """Play ``episodes`` episodes; returns each episode's history frames (T + 1, A, 4), the
     frame after the reset first and the final frame last."""
     num_envs = min(episodes, 50)
-    env = make_env(config, num_envs=num_envs, seed=seed)
+    env = make_env(config, num_envs=num_envs, seed=seed, wait_kernels=True)
     obs, info = env.reset(seed=seed)
     policy.reset(None)
     current: list[list[torch.Tensor]] = [[info["history"][i, -1]] for i in range(num_envs)]

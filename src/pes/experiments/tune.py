@@ -4,11 +4,12 @@
 
 A search samples ``trials`` settings of the learner's :attr:`~pes.learn.learner.Learner.
 TUNE_SPACE` (two to four keys: learning rates, exploration or entropy, batch size, network
-width) by random search from a fixed seed; trial 0 is the preset itself (its values of those keys,
-written out, so that a trial's settings stay what they were when the preset later changes). Each trial trains
-the quick preset with its settings under the chosen protocol, on one torch thread, and the
-budget is experience, not time: ``env_steps`` control steps of one environment (the quick
-preset's budget by default), the same work on every machine and beside any other job.
+width) by random search from a fixed seed; trial 0 is the preset itself (its values of those
+keys, written out, so that a trial's settings stay what they were when the preset later
+changes). Each trial trains the quick preset with its settings under the chosen protocol, on
+one torch thread, and the budget is experience, not time: ``env_steps`` control steps of one
+environment (the quick preset's budget by default), the same work on every machine and beside
+any other job.
 
 The budget is spent by successive halving: every trial trains to ``env_steps / 2**halvings``
 env steps and is scored; the better half trains on to twice that and is scored again; and so on
@@ -378,8 +379,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         )
         + f". Each score is on the same {first['eval_episodes']} held-out episodes (disturbance "
         "on, crashes disable, the default evader): success rate, then mean reward. Trial t00 is "
-        f"the {first['preset']} preset as it was when the search began. Trials are ranked by the furthest budget they reached, then "
-        "by their score there.",
+        f"the {first['preset']} preset as it was when the search began. Trials are ranked by the "
+        "furthest budget they reached, then by their score there.",
         "",
         f"Command: `{command}`" if command else "",
         "",

@@ -322,6 +322,7 @@ def train(
             device=device,
             seed=cfg.seed * 1_000_003 + prog.episodes,
             compile=cfg.compile_env,
+            wait_kernels=True,  # every step of a run on the same path
         )
         if prog.evader_speed > 0:
             env.set_evader_max_speed(prog.evader_speed)

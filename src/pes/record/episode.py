@@ -146,7 +146,7 @@ def record_episode(policy, config: EnvConfig, seed: int = 0, device: str = "cpu"
     """Play one episode of the pursuer ``policy`` (a :class:`pes.policies.Policy`) in the
     scenario ``config`` from the environment seed ``seed`` and return its record. Policies that
     predict the evader's path (``last_prediction``, arena units) get it recorded in metres."""
-    env = make_env(config, num_envs=1, device=device, seed=seed)
+    env = make_env(config, num_envs=1, device=device, seed=seed, wait_kernels=True)
     obs, info = env.reset(seed=seed)
     policy.reset(None)
     recorder = EpisodeRecorder(env)

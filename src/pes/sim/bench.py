@@ -74,7 +74,7 @@ def pes_timer(config: EnvConfig, num_envs: int, device: str = "cpu", compile: bo
     """A :class:`Timer` of the batched environment, warmed up; and the set-up times."""
     start = time.perf_counter()
     env = make_env(config, num_envs=num_envs, device=device, seed=seed, compile=compile,
-                   check_actions=False)  # fmt: skip
+                   check_actions=False, wait_kernels=True)  # fmt: skip
     env.reset(seed=seed)
     # Desynchronise the episodes: environment i starts at a random step of its episode.
     generator = torch.Generator().manual_seed(seed)

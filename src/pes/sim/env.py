@@ -10,7 +10,7 @@ import torch
 from torch import Tensor
 
 from pes.errors import ActionError, ConfigError, PESError
-from pes.sim import rng, scenario
+from pes.sim import kernels, rng, scenario
 from pes.sim.config import EnvConfig, resolve_config
 from pes.sim.layout import Layout
 
@@ -57,6 +57,7 @@ class PursuitEvasionEnv:
         *,
         compile: bool = False,
         check_actions: bool = True,
+        wait_kernels: bool = False,
     ) -> None:
         self.config = resolve_config(config)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
@@ -67,6 +68,8 @@ class PursuitEvasionEnv:
             raise ConfigError(f"seed must be an integer, got {seed!r}")
         self._seed = seed if seed is not None else secrets.randbits(31)
         self.check_actions = check_actions
+        if wait_kernels and self.device.type == "cpu" and not compile:
+            kernels.wait()
         self.scenario = scenario.build_scenario(self.config, self.device)
         sc = self.scenario
         # Auto-reset handles up to this many finished environments per pass (static shapes).
@@ -335,9 +338,14 @@ def make_env(
     ``config`` is an :class:`EnvConfig`, a dict of its keys, or None for the defaults.
     Keyword ``options``: ``compile=True`` fuses the step with ``torch.compile`` (several times
     faster once compiled; the first step then takes tens of seconds), ``check_actions=False``
-    skips the NaN check of actions (one host-device sync per step on CUDA).
+    skips the NaN check of actions (one host-device sync per step on CUDA),
+    ``wait_kernels=True`` loads the compiled CPU kernels of the step before the first step
+    (compiling them here, 10-20 s once per machine, if none are cached) so that every step runs
+    them. Without it, on a machine where they are not compiled yet, the first step does not
+    wait: a background process compiles them and the steps run the torch code until it is
+    done (the same physics up to float32 rounding; :mod:`pes.sim.kernels`).
     """
-    unknown = set(options) - {"compile", "check_actions"}
+    unknown = set(options) - {"compile", "check_actions", "wait_kernels"}
     if unknown:
         raise ConfigError(f"unknown make_env options {sorted(unknown)}")
     return PursuitEvasionEnv(config, num_envs, device, seed, **options)

@@ -17,14 +17,27 @@ crashes and resets on both paths; trajectories drift apart by rounding over many
 disturbance (counter-based random numbers) and the network evader stay in torch.
 
 The kernels are in :mod:`pes.sim._numba_substeps` and :mod:`pes.sim._numba_step`, imported on
-first use only (so that ``import pes`` does not import Numba); Numba compiles them then (a few
-seconds) and caches the machine code beside those files, so later processes load it.
-``PES_KERNELS=0`` in the environment, or a missing ``numba``, selects the torch code.
+first use only (so that ``import pes`` does not import Numba). Numba compiles them once per
+machine (some 10-20 s) and caches the machine code (beside those files, or in
+``NUMBA_CACHE_DIR``); a file ``pes-kernels-<key>.ready`` there says that a compilation
+finished for these sources, this Python and this Numba. When the first step finds no such file
+it does not wait: a background process compiles the kernels while the steps run in torch, and
+the steps switch to the kernels once it is done. :func:`wait` loads them first, compiling them
+if need be: evaluations, trainings, ``pes bench`` and the demo call it, so that their figures
+never depend on when a compilation finished. ``PES_KERNELS=0`` in the environment, or a
+missing ``numba``, selects the torch code.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.metadata
 import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -33,11 +46,16 @@ from torch import Tensor
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
 _step = None  # the module of the step's kernels, once loaded
 _failed = False  # numba is missing or failed: use the torch code
+_child: subprocess.Popen | None = None  # the background compilation this process started
+_next_look = 0.0  # time.monotonic() of the next look at the background compilation
+_LOOK_EVERY = 0.5  # seconds between looks
+_SOURCES = ("_numba_step.py", "_numba_substeps.py")
 
 
 def available(t: Tensor) -> bool:
-    """Whether the kernels serve tensors like ``t``: float32 on the CPU, no gradient, not
-    under ``torch.compile``, and Numba importable (``PES_KERNELS`` not 0)."""
+    """Whether the kernels serve tensors like ``t`` now: float32 on the CPU, no gradient, not
+    under ``torch.compile``, Numba importable (``PES_KERNELS`` not 0) and the kernels compiled
+    (while a first compilation runs in the background, the torch code serves)."""
     return (
         _ENABLED
         and not _failed
@@ -49,41 +67,116 @@ def available(t: Tensor) -> bool:
     )
 
 
-def _load():
-    """The module of the step's kernels, compiled (or read from Numba's cache) on first call,
-    or None. The sub-step kernel alone (:func:`quadrotor_substeps`, for the physics outside
-    a full step) compiles on its own first call."""
-    global _step, _failed
-    if _step is None and not _failed:
-        try:
-            from pes.sim import _numba_step
+def wait() -> bool:
+    """Load the kernels now, compiling them here if no compilation is cached (or waiting for
+    the background one); returns whether they serve (False: ``PES_KERNELS=0``, no Numba, or
+    a Numba that cannot compile them)."""
+    if _ENABLED and _step is None and not _failed:
+        if _child is not None:
+            _child.wait()
+        _compile_here()
+    return _step is not None
 
-            # Compile (or load from the cache) now, for the argument types of every call, so
-            # that a Numba that cannot compile means the torch code, not an error mid-step.
-            f32 = np.float32
-            vehicles, cube = np.ones((16, 1, 2), np.float32), np.zeros((13, 1, 2), np.float32)
-            alive = np.ones((1, 1), np.bool_)
-            boxes = np.ones((1, 4), np.float32)
-            _numba_step.observe(vehicles, alive, np.zeros((1, 1), np.int64), *[f32(1)] * 4)
-            rays = np.ones((1, 5), np.float32)
-            consts = np.ones(12, np.float32)
-            _numba_step.flee(vehicles, alive, rays, boxes, boxes[:, :2], *[f32(1)] * 3, consts)
-            actions, axes = np.zeros((1, 1, 2), np.float32), np.zeros(1, np.float32)
-            params, none = np.ones((5, 2), np.float32), np.zeros((0, 0), np.float32)
-            speeds = np.ones(2, np.float32)
-            _numba_step.move(
-                vehicles, actions, axes, axes, alive, none, none, params, speeds, consts[:6], 1
+
+def ready_marker() -> Path:
+    """The file that says the kernels of these sources are compiled and cached for this
+    Python, Numba and machine type (it holds no code: Numba's cache does)."""
+    key = hashlib.sha1()
+    here = Path(__file__).resolve().parent
+    for name in _SOURCES:
+        key.update((here / name).read_bytes())
+    numba_version = importlib.metadata.version("numba")
+    key.update(f"{sys.version_info[:2]} {platform.machine()} {numba_version}".encode())
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    root = Path(folder) if folder else here / "__pycache__"
+    return root / f"pes-kernels-{key.hexdigest()[:16]}.ready"
+
+
+def _load():
+    """The module of the step's kernels if they serve now, else None: loaded from the cache
+    when a compilation is marked ready, otherwise a background compilation started (or
+    looked at, every half second) and None meanwhile."""
+    global _child, _next_look, _failed
+    if _step is not None or _failed:
+        return _step
+    now = time.monotonic()
+    if now < _next_look:
+        return None
+    _next_look = now + _LOOK_EVERY
+    try:
+        marked = ready_marker().is_file()
+    except (OSError, importlib.metadata.PackageNotFoundError):  # no numba: the torch code
+        _failed = True
+        return None
+    if marked or (_child is not None and _child.poll() is not None):
+        _compile_here()  # from the cache (or here, if the background compilation failed)
+    elif _child is None:
+        try:
+            _child = subprocess.Popen(
+                [sys.executable, "-m", "pes.sim.kernels"],
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
             )
-            counters = np.ones((7, 1), np.int64)
-            history = np.zeros((1, 2, 2, 4), np.float32)
-            ints, consts = np.ones(5, np.int64), np.ones(20, np.float32)
-            _numba_step.collide(
-                vehicles, cube, alive, alive, counters, history, boxes, ints, consts
-            )
-            _step = _numba_step
-        except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch code
-            _failed = True
+        except OSError:
+            _compile_here()
     return _step
+
+
+def _compile_here() -> None:
+    """Load the step's kernels in this process (Numba reads its cache or compiles), for the
+    argument types of every call, so that a Numba that cannot compile means the torch code,
+    not an error mid-step; then mark them ready. The sub-step kernel alone
+    (:func:`quadrotor_substeps`, for the physics outside a full step) compiles on its own first
+    call."""
+    global _step, _failed
+    if _step is not None or _failed:
+        return
+    try:
+        from pes.sim import _numba_step
+
+        f32 = np.float32
+        vehicles, cube = np.ones((16, 1, 2), np.float32), np.zeros((13, 1, 2), np.float32)
+        alive = np.ones((1, 1), np.bool_)
+        boxes = np.ones((1, 4), np.float32)
+        _numba_step.observe(vehicles, alive, np.zeros((1, 1), np.int64), *[f32(1)] * 4)
+        rays = np.ones((1, 5), np.float32)
+        consts = np.ones(12, np.float32)
+        _numba_step.flee(vehicles, alive, rays, boxes, boxes[:, :2], *[f32(1)] * 3, consts)
+        actions, axes = np.zeros((1, 1, 2), np.float32), np.zeros(1, np.float32)
+        params, none = np.ones((5, 2), np.float32), np.zeros((0, 0), np.float32)
+        speeds = np.ones(2, np.float32)
+        _numba_step.move(
+            vehicles, actions, axes, axes, alive, none, none, params, speeds, consts[:6], 1
+        )
+        counters = np.ones((7, 1), np.int64)
+        history = np.zeros((1, 2, 2, 4), np.float32)
+        ints, consts = np.ones(5, np.int64), np.ones(20, np.float32)
+        _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, ints, consts)
+    except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch code
+        _failed = True
+        return
+    _step = _numba_step
+    try:
+        marker = ready_marker()
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+    except OSError:  # a read-only cache folder: later processes compile or load it again
+        pass
+
+
+def _compile_all() -> None:
+    """What the background compilation runs (``python -m pes.sim.kernels``): the step's
+    kernels and the sub-step kernel, into Numba's cache, then the ready mark."""
+    from pes.sim._numba_substeps import substeps
+
+    one, f32 = np.ones((1, 1), np.float32), np.float32
+    state, trig = np.zeros((13, 1, 1), np.float32), np.ones((6, 1, 1), np.float32)
+    gyro, speed = np.zeros((3, 1), np.float32), np.ones(1, np.float32)
+    substeps(state, trig, one, one, one, one, gyro, speed, *[f32(1)] * 5, 1)
+    _compile_here()
+    if _step is None:
+        sys.exit(1)
 
 
 def quadrotor_substeps(
@@ -360,3 +453,7 @@ def collide(
     out = {"steps": counters[3].clone(), "crashes": counters[5].clone(), "alive": alive}
     out.update(zip(COLLIDE_OUTPUTS, rest))
     return stepped, out
+
+
+if __name__ == "__main__":
+    _compile_all()
