@@ -170,7 +170,8 @@ def test_the_quick_presets_of_table4_share_one_protocol_and_one_run():
 def test_the_quick_presets_hold_what_their_searches_found():
     """A learner whose equal search (``results/tuning/<algo>``, ``pes tune``) is complete trains
     the search's best settings in its quick preset; one whose search is not finished keeps the
-    values its trial t00 began from, so that no preset changes under a running search."""
+    values of the searched settings that its trial t00 began from (the settings under search
+    do not change under it)."""
     root = Path(__file__).resolve().parents[1] / "results" / "tuning"
     searched = []
     for algo in (*TABLE4_ALGOS, "cbc"):
@@ -182,7 +183,7 @@ def test_the_quick_presets_hold_what_their_searches_found():
         want = summary["best"] if summary["complete"] else first
         if want is None:
             continue
-        preset = build_train_config(algo, "quick").learner
+        preset = build_train_config(algo, "quick", protocol=summary["protocol"]).learner
         assert {key: getattr(preset, key) for key in want} == want, algo
         searched.append(algo)
     assert {"cbc-tp", "maddpg"} <= set(searched)

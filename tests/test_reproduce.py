@@ -217,8 +217,9 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     second call finds everything done; another budget is refused; --report-only reports what is
     scored and runs nothing."""
     import pes.experiments.tune as tune_module
+    from pes.algos.ppo import PPO_PRESETS
     from pes.errors import ConfigError
-    from pes.experiments.tune import score, tune
+    from pes.experiments.tune import make_tune_trials, score, tune
 
     kwargs = dict(
         trials=3, env_steps=800, halvings=1, eval_episodes=2, preset="tiny", use_ray=False
@@ -254,6 +255,12 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     assert "t01" in (tmp_path / "README.md").read_text()
     again = tune("ppo", out=tmp_path, progress=False, **kwargs)
     assert again["results"] == summary["results"]
+    # A preset that took a search's best since: the search is still the one it began as.
+    monkeypatch.setitem(PPO_PRESETS["tiny"], "lr_actor", 1.23e-4)
+    first = make_tune_trials("ppo", 3, 800, 1, 2, "pes", 0, "tiny")[0]
+    assert first["values"]["lr_actor"] == 1.23e-4
+    assert tune("ppo", out=tmp_path, progress=False, **kwargs)["results"] == summary["results"]
+    monkeypatch.undo()
     with pytest.raises(ConfigError, match="other settings"):
         tune("ppo", out=tmp_path, progress=False, **dict(kwargs, env_steps=1600))
     (tmp_path / "trials" / "t00" / "result.json").write_text("{}")  # a CPU-minute trial's

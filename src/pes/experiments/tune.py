@@ -152,6 +152,18 @@ def check_trial(out: Path, spec: dict) -> None:
             )
 
 
+def started_values(out: Path, first: dict) -> dict[str, Any] | None:
+    """The settings trial ``first`` (t00, the preset) began with in ``out``, if it began: the
+    preset as it was then, which a search's best may have replaced since (None: not begun)."""
+    folder = Path(out) / "trials" / first["id"]
+    for path in sorted([*folder.glob("spec.json"), *folder.glob("result-*.json")]):
+        record = json.loads(path.read_text())
+        held = record.get("spec", record)
+        if {**held, "values": first["values"]} == first:  # only the values may differ
+            return held["values"]
+    return None
+
+
 def finished(out: Path, spec: dict, env_steps: int) -> dict[str, Any] | None:
     """The score of trial ``spec`` at ``env_steps`` in ``out`` if it has one (None if not)
     (:func:`check_trial` first)."""
@@ -281,6 +293,7 @@ def tune(
     )
     out = Path(out or f"results/tuning/{algo}")
     out.mkdir(parents=True, exist_ok=True)
+    specs[0]["values"] = started_values(out, specs[0]) or specs[0]["values"]
     use_ray = choose_runner(use_ray, ray_address)
     start = time.time()
     while not report_only and (round_ := pending(rounds(out, specs))) is not None:

@@ -68,7 +68,7 @@ class PursuitEvasionEnv:
             raise ConfigError(f"seed must be an integer, got {seed!r}")
         self._seed = seed if seed is not None else secrets.randbits(31)
         self.check_actions = check_actions
-        if wait_kernels and self.device.type == "cpu" and not compile:
+        if wait_kernels and self.device.type == "cpu":  # compile=True: its eager reset uses them
             kernels.wait()
         self.scenario = scenario.build_scenario(self.config, self.device)
         sc = self.scenario
@@ -340,7 +340,7 @@ def make_env(
     faster once compiled; the first step then takes tens of seconds), ``check_actions=False``
     skips the NaN check of actions (one host-device sync per step on CUDA),
     ``wait_kernels=True`` loads the compiled CPU kernels of the step before the first step
-    (compiling them here, 10-20 s once per machine, if none are cached) so that every step runs
+    (compiling them here, some 20-35 s once per machine, if none are cached) so that every step runs
     them. Without it, on a machine where they are not compiled yet, the first step does not
     wait: a background process compiles them and the steps run the torch code until it is
     done (the same physics up to float32 rounding; :mod:`pes.sim.kernels`).

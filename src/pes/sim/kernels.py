@@ -18,7 +18,7 @@ disturbance (counter-based random numbers) and the network evader stay in torch.
 
 The kernels are in :mod:`pes.sim._numba_substeps` and :mod:`pes.sim._numba_step`, imported on
 first use only (so that ``import pes`` does not import Numba). Numba compiles them once per
-machine (some 10-20 s) and caches the machine code (beside those files, or in
+machine (some 20-35 s on a 2-core machine) and caches the machine code (beside those files, or in
 ``NUMBA_CACHE_DIR``); a file ``pes-kernels-<key>.ready`` there says that a compilation
 finished for these sources, this Python and this Numba. When the first step finds no such file
 it does not wait: a background process compiles the kernels while the steps run in torch, and
@@ -67,6 +67,11 @@ def available(t: Tensor) -> bool:
     )
 
 
+def serving() -> bool:
+    """Whether the kernels are loaded in this process (the steps that can use them do)."""
+    return _step is not None
+
+
 def wait() -> bool:
     """Load the kernels now, compiling them here if no compilation is cached (or waiting for
     the background one); returns whether they serve (False: ``PES_KERNELS=0``, no Numba, or
@@ -80,15 +85,26 @@ def wait() -> bool:
 
 def ready_marker() -> Path:
     """The file that says the kernels of these sources are compiled and cached for this
-    Python, Numba and machine type (it holds no code: Numba's cache does)."""
+    Python, Numba and machine type (it holds no code: Numba's cache does). Its name is keyed
+    as Numba keys its cache: the sources' path, modification time and size, and their
+    contents, Python's and Numba's versions and the machine type. Raises
+    ``importlib.metadata.PackageNotFoundError`` where Numba is not installed."""
     key = hashlib.sha1()
     here = Path(__file__).resolve().parent
     for name in _SOURCES:
-        key.update((here / name).read_bytes())
+        source = here / name
+        facts = source.stat()
+        key.update(f"{source} {facts.st_mtime_ns} {facts.st_size}".encode())
+        key.update(source.read_bytes())
     numba_version = importlib.metadata.version("numba")
     key.update(f"{sys.version_info[:2]} {platform.machine()} {numba_version}".encode())
     folder = os.environ.get("NUMBA_CACHE_DIR")
-    root = Path(folder) if folder else here / "__pycache__"
+    if folder:
+        root = Path(folder)
+    elif os.access(here, os.W_OK):
+        root = here / "__pycache__"  # where Numba caches them too
+    else:  # a read-only installation: Numba caches in the user's folder
+        root = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "pes"
     return root / f"pes-kernels-{key.hexdigest()[:16]}.ready"
 
 
@@ -103,37 +119,44 @@ def _load():
     if now < _next_look:
         return None
     _next_look = now + _LOOK_EVERY
+    if _child is not None:  # this process's background compilation
+        code = _child.poll()
+        if code == 0:
+            _compile_here()  # from the cache it filled
+        elif code is not None:  # it failed: Numba cannot compile them here either
+            _failed = True
+        return _step
     try:
         marked = ready_marker().is_file()
-    except (OSError, importlib.metadata.PackageNotFoundError):  # no numba: the torch code
-        _failed = True
-        return None
-    if marked or (_child is not None and _child.poll() is not None):
-        _compile_here()  # from the cache (or here, if the background compilation failed)
-    elif _child is None:
-        try:
-            _child = subprocess.Popen(
-                [sys.executable, "-m", "pes.sim.kernels"],
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-            )
-        except OSError:
-            _compile_here()
+    except (OSError, importlib.metadata.PackageNotFoundError):
+        marked = True  # no mark to look for: load (or compile) them here, as wait() does
+    if marked:
+        _compile_here()
+        return _step
+    try:
+        _child = subprocess.Popen(
+            [sys.executable, "-c", "from pes.sim import kernels; kernels._compile_all()"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            # the child imports pes as this process does (a path added at run time too)
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(p or "." for p in sys.path)},
+        )
+    except OSError:
+        _compile_here()
     return _step
 
 
 def _compile_here() -> None:
-    """Load the step's kernels in this process (Numba reads its cache or compiles), for the
-    argument types of every call, so that a Numba that cannot compile means the torch code,
-    not an error mid-step; then mark them ready. The sub-step kernel alone
-    (:func:`quadrotor_substeps`, for the physics outside a full step) compiles on its own first
-    call."""
+    """Load the kernels in this process (Numba reads its cache or compiles), for the argument
+    types of every call, so that a Numba that cannot compile means the torch code, not an
+    error mid-step; then mark them ready."""
     global _step, _failed
     if _step is not None or _failed:
         return
     try:
         from pes.sim import _numba_step
+        from pes.sim._numba_substeps import substeps
 
         f32 = np.float32
         vehicles, cube = np.ones((16, 1, 2), np.float32), np.zeros((13, 1, 2), np.float32)
@@ -153,6 +176,10 @@ def _compile_here() -> None:
         history = np.zeros((1, 2, 2, 4), np.float32)
         ints, consts = np.ones(5, np.int64), np.ones(20, np.float32)
         _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, ints, consts)
+        # the sub-step kernel of the physics outside a full step (quadrotor_substeps)
+        one, state = np.ones((1, 1), np.float32), np.zeros((13, 1, 1), np.float32)
+        trig, gyro = np.ones((6, 1, 1), np.float32), np.zeros((3, 1), np.float32)
+        substeps(state, trig, one, one, one, one, gyro, np.ones(1, np.float32), *[f32(1)] * 5, 1)
     except Exception:  # noqa: BLE001 - no numba, or one that cannot compile: torch code
         _failed = True
         return
@@ -161,19 +188,13 @@ def _compile_here() -> None:
         marker = ready_marker()
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.touch()
-    except OSError:  # a read-only cache folder: later processes compile or load it again
+    except (OSError, importlib.metadata.PackageNotFoundError):  # later processes load it here
         pass
 
 
 def _compile_all() -> None:
-    """What the background compilation runs (``python -m pes.sim.kernels``): the step's
-    kernels and the sub-step kernel, into Numba's cache, then the ready mark."""
-    from pes.sim._numba_substeps import substeps
-
-    one, f32 = np.ones((1, 1), np.float32), np.float32
-    state, trig = np.zeros((13, 1, 1), np.float32), np.ones((6, 1, 1), np.float32)
-    gyro, speed = np.zeros((3, 1), np.float32), np.ones(1, np.float32)
-    substeps(state, trig, one, one, one, one, gyro, speed, *[f32(1)] * 5, 1)
+    """The background compilation (a child process): the kernels into Numba's cache and the
+    ready mark; exits with status 1 where they cannot be compiled."""
     _compile_here()
     if _step is None:
         sys.exit(1)
@@ -453,7 +474,3 @@ def collide(
     out = {"steps": counters[3].clone(), "crashes": counters[5].clone(), "alive": alive}
     out.update(zip(COLLIDE_OUTPUTS, rest))
     return stepped, out
-
-
-if __name__ == "__main__":
-    _compile_all()
