@@ -18,7 +18,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from pes.algos.maddpg import MADDPG, MADDPG_PRESETS, MADDPGConfig
+from pes.algos.maddpg import DDPG_PRESETS, MADDPG, MADDPGConfig
 from pes.learn.features import pursuer_obs
 from pes.learn.nets import EnsembleMLP, RowScaled, observation_input
 
@@ -54,18 +54,7 @@ class DDPG(MADDPG):
     """Independent DDPG learners (``algo: ddpg``)."""
 
     name = "ddpg"
-    # MADDPG's presets, but its quick one before MADDPG's search tuned it: DDPG gets a search
-    # of its own from these values
-    PRESETS = {
-        **MADDPG_PRESETS,
-        "quick": {
-            **MADDPG_PRESETS["quick"],
-            "mlp_hidden": 64,
-            "lr_actor": 5e-4,
-            "lr_critic": 1e-3,
-            "batch_size": 256,
-        },
-    }
+    PRESETS = DDPG_PRESETS
 
     @staticmethod
     def make_critic(lc: MADDPGConfig, num_pursuers: int) -> nn.Module:

@@ -51,21 +51,29 @@ class MADDPGConfig(ActorCriticConfig):
     POSITIVE: ClassVar[tuple[str, ...]] = (*ActorCriticConfig.POSITIVE, "mlp_hidden")
 
 
+MLP_QUICK: dict[str, Any] = dict(
+    QUICK_RUN,
+    mlp_hidden=64,
+    lr_actor=5e-4,
+    lr_critic=1e-3,
+    buffer_size=300_000,
+    batch_size=256,
+    update_every=16,
+    warmup=10_000,
+)
+"""The quick preset of the MLP learners before their searches: CBC Net's quick learner with
+MLPs, twice as many updates (an MLP update is cheap). DDPG's quick preset (its search starts
+from it); MADDPG's with its search's best on top."""
+
+MADDPG_TUNED: dict[str, Any] = dict(
+    lr_actor=1.9e-3, lr_critic=1.31e-3, batch_size=512, mlp_hidden=128
+)
+"""The best of MADDPG's search (results/tuning/maddpg, trial t07: 23.0 % after 2,000,000 env
+steps)."""
+
 MADDPG_PRESETS: dict[str, dict[str, Any]] = {
     "paper": dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
-    # CBC Net's quick learner with MLPs, twice as many updates (an MLP update is cheap); the
-    # learning rates, batch and width are the best of MADDPG's search (results/tuning/maddpg,
-    # trial t07: 23.0 % after 2,000,000 env steps)
-    "quick": dict(
-        QUICK_RUN,
-        mlp_hidden=128,
-        lr_actor=1.9e-3,
-        lr_critic=1.31e-3,
-        buffer_size=300_000,
-        batch_size=512,
-        update_every=16,
-        warmup=10_000,
-    ),
+    "quick": {**MLP_QUICK, **MADDPG_TUNED},
     "tiny": dict(
         TINY_RUN,
         mlp_hidden=32,
@@ -76,7 +84,10 @@ MADDPG_PRESETS: dict[str, dict[str, Any]] = {
         protocol=TINY_PROTOCOL,
     ),
 }
-"""MADDPG's presets (DDPG's too)."""
+"""MADDPG's presets."""
+
+DDPG_PRESETS: dict[str, dict[str, Any]] = {**MADDPG_PRESETS, "quick": MLP_QUICK}
+"""DDPG's presets: MADDPG's, with the untuned quick one."""
 
 
 class MLPActors(RowScaled):

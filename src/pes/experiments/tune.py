@@ -143,22 +143,26 @@ def check_trial(out: Path, spec: dict) -> None:
         raise ConfigError(
             f"'{folder}' holds a trial of a search budgeted in CPU minutes; choose another --out"
         )
-    for path in sorted([*folder.glob("spec.json"), *folder.glob("result-*.json")]):
-        record = json.loads(path.read_text())
-        held = record.get("spec", record)
+    for held in stored_specs(folder):
         if held != spec:
             raise ConfigError(
                 f"'{folder}' holds a trial run with other settings ({held}); choose another --out"
             )
 
 
+def stored_specs(folder: Path) -> list[dict]:
+    """The trial specs a trial folder holds: its ``spec.json`` and every score's."""
+    held = []
+    for path in sorted([*folder.glob("spec.json"), *folder.glob("result-*.json")]):
+        record = json.loads(path.read_text())
+        held.append(record.get("spec", record))  # a score holds its spec, spec.json is one
+    return held
+
+
 def started_values(out: Path, first: dict) -> dict[str, Any] | None:
     """The settings trial ``first`` (t00, the preset) began with in ``out``, if it began: the
     preset as it was then, which a search's best may have replaced since (None: not begun)."""
-    folder = Path(out) / "trials" / first["id"]
-    for path in sorted([*folder.glob("spec.json"), *folder.glob("result-*.json")]):
-        record = json.loads(path.read_text())
-        held = record.get("spec", record)
+    for held in stored_specs(Path(out) / "trials" / first["id"]):
         if {**held, "values": first["values"]} == first:  # only the values may differ
             return held["values"]
     return None
