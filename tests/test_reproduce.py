@@ -210,6 +210,21 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
     assert summary["complete"] and summary["best"] == specs[1]["values"]
 
 
+def test_tune_runs_the_trials_that_resume_first(tmp_path):
+    """A round starts the trials that resume from a checkpoint before those that train from
+    the start (whose checkpoint is gone, or never was), each group in its order."""
+    from pes.experiments.tune import make_tune_trials, resumable_first
+
+    specs = make_tune_trials("ppo", 4, 800, 0, 2, "pes", 0, "tiny")
+    for trial in ("t01", "t03"):
+        run = tmp_path / "trials" / trial / "run"
+        run.mkdir(parents=True)
+        (run / "checkpoint.pt").write_bytes(b"")
+    (tmp_path / "trials" / "t02" / "run").mkdir(parents=True)  # a run without a checkpoint
+    order = [s["id"] for s in resumable_first(tmp_path, specs)]
+    assert order == ["t01", "t03", "t00", "t02"]
+
+
 def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, monkeypatch):
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial

@@ -267,6 +267,17 @@ def pending(found: list[tuple[int, list[dict], dict[str, dict]]]) -> tuple[int, 
     return (budget, todo) if todo else None
 
 
+def resumable_first(out: Path, todo: list[dict]) -> list[dict]:
+    """``todo`` with the trials that resume from a checkpoint (``trials/<id>/run/
+    checkpoint.pt``) first, each group in its order: a round's shortest work runs first, so
+    that an interruption loses the least (a trial whose checkpoint is gone trains again from
+    the start: the schedules count episodes, so it trains as the resumed run would)."""
+    def resumes(spec: dict) -> bool:
+        return (Path(out) / "trials" / spec["id"] / "run" / "checkpoint.pt").is_file()
+
+    return sorted(todo, key=lambda spec: not resumes(spec))
+
+
 def tune(
     algo: str,
     trials: int = 8,
@@ -301,7 +312,7 @@ def tune(
     use_ray = choose_runner(use_ray, ray_address)
     start = time.time()
     while not report_only and (round_ := pending(rounds(out, specs))) is not None:
-        budget, todo = round_
+        budget, todo = round_[0], resumable_first(out, round_[1])
         view = SweepProgress(len(todo), 0, progress, f"tune {budget:,} env steps")
         batch = [{**s, "env_steps": budget} for s in todo]
         try:
