@@ -100,6 +100,9 @@ def run_ray(
     """Every trial as a Ray Tune trial with one CPU (and one torch thread), at most ``parallel``
     at once (0: as many as the cluster's CPUs). With ``address``, the output folder must be on
     storage that every node of the cluster sees."""
+    # Trials hold every core, so Tune's driver often waits more than its default half second
+    # for a callback, and would warn of it on every step of the progress view.
+    os.environ.setdefault("TUNE_WARN_THRESHOLD_S", "60")
     import ray  # noqa: PLC0415 - an optional dependency
     from ray import tune  # noqa: PLC0415
 
