@@ -272,6 +272,7 @@ def resumable_first(out: Path, todo: list[dict]) -> list[dict]:
     checkpoint.pt``) first, each group in its order: a round's shortest work runs first, so
     that an interruption loses the least (a trial whose checkpoint is gone trains again from
     the start, under the same schedules: they count episodes, not the budget)."""
+
     def resumes(spec: dict) -> bool:
         return (Path(out) / "trials" / spec["id"] / "run" / "checkpoint.pt").is_file()
 
