@@ -129,6 +129,11 @@ def preset_env_steps(algo: str, preset: str, protocol: str) -> int:
     return steps
 
 
+def run_folder(out: Path, spec: dict) -> Path:
+    """Where trial ``spec`` trains (its checkpoint, not committed)."""
+    return Path(out) / "trials" / spec["id"] / "run"
+
+
 def result_path(out: Path, spec: dict, env_steps: int) -> Path:
     """Where trial ``spec``'s score at ``env_steps`` is kept."""
     return Path(out) / "trials" / spec["id"] / f"result-{env_steps}.json"
@@ -203,7 +208,7 @@ def run_tune_trial(
         "log_every": 50,
     }
     cfg = build_train_config(spec["algo"], spec["preset"], values, protocol=spec["protocol"])
-    run = folder / "run"
+    run = run_folder(out, spec)
     summary_path = run / "summary.json"
     trained = json.loads(summary_path.read_text())["env_steps"] if summary_path.is_file() else 0
     if trained < env_steps:
@@ -273,10 +278,7 @@ def resumable_first(out: Path, todo: list[dict]) -> list[dict]:
     that an interruption loses the least (a trial whose checkpoint is gone trains again from
     the start, under the same schedules: they count episodes, not the budget)."""
 
-    def resumes(spec: dict) -> bool:
-        return (Path(out) / "trials" / spec["id"] / "run" / "checkpoint.pt").is_file()
-
-    return sorted(todo, key=lambda spec: not resumes(spec))
+    return sorted(todo, key=lambda spec: not (run_folder(out, spec) / "checkpoint.pt").is_file())
 
 
 def tune(
