@@ -225,6 +225,37 @@ def test_tune_runs_the_trials_that_resume_first(tmp_path):
     assert order == ["t01", "t03", "t00", "t02"]
 
 
+def test_tune_report_draws_every_trial_learning_curve(tmp_path):
+    """curves.png: one training curve per trial with a log, its held-out scores as dots."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from pes.experiments.tune import write_curves
+
+    header = "episodes,env_steps,success_rate,avg_reward\n"
+    for trial, rows in (("t00", "50,2000,0.1,-1.0\n100,4000,0.5,-0.5\n"), ("t01", "")):
+        (tmp_path / "trials" / trial).mkdir(parents=True)
+        (tmp_path / "trials" / trial / "progress.csv").write_text(header + rows)
+    results = [
+        {"id": "t00", "by_budget": {"2000": {"success_rate": 0.2}, "4000": {"success_rate": 0.6}}},
+        {"id": "t01", "by_budget": {"2000": {"success_rate": 0.0}}},
+    ]
+    drawn = []
+    real_plot = matplotlib.axes.Axes.plot
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(
+            matplotlib.axes.Axes,
+            "plot",
+            lambda ax, *a, **k: drawn.append(a) or real_plot(ax, *a, **k),
+        )
+        assert write_curves(tmp_path, results, [2000, 4000])
+    assert (tmp_path / "curves.png").read_bytes().startswith(b"\x89PNG")
+    # t00's curve in % over env steps, then its held-out dots; t01 logged no row: nothing drawn
+    assert [list(map(float, a[0])) for a in drawn] == [[2000, 4000], [2000, 4000]]
+    assert [list(map(float, a[1])) for a in drawn] == [[10.0, 50.0], [20.0, 60.0]]
+    assert not write_curves(tmp_path, results[1:], [2000])
+
+
 def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, monkeypatch):
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial
@@ -268,6 +299,9 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     assert values["t00"] == {key: getattr(preset, key) for key in space}
     assert summary["best"] == summary["results"][0]["values"]
     assert "t01" in (tmp_path / "README.md").read_text()
+    # the tiny runs are too short to log a row: no learning curves, and none claimed
+    assert "curves.png" not in (tmp_path / "README.md").read_text()
+    assert not (tmp_path / "curves.png").exists()
     again = tune("ppo", out=tmp_path, progress=False, **kwargs)
     assert again["results"] == summary["results"]
     # A preset that took a search's best since: the search is still the one it began as.

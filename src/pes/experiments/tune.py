@@ -24,7 +24,8 @@ learner gets the same budget: the same trials, halvings, env steps and evaluatio
 Each trial runs in ``OUT/trials/<id>/`` (its training run in ``run/``, its score at each budget
 in ``result-<env_steps>.json``, its run's ``progress.csv`` and ``config.yaml`` copied beside
 them), so a search killed at any point resumes where it stopped; ``OUT/tuning.json`` and
-``OUT/README.md`` list every trial's settings and scores with the command.
+``OUT/README.md`` list every trial's settings and scores with the command, and
+``OUT/curves.png`` shows every trial's learning curve beside its scores.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ import shutil
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, learner_class, train
 from pes.algos.policy import load_pursuer_policy
@@ -333,7 +336,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
     of the search it reached, the trials ranked by the furthest round they reached, then by
     their score there; each scored trial's learning curve and settings (its run's
     ``progress.csv`` and ``config.yaml``) beside its scores, where the run is (the run folder is
-    not kept)."""
+    not kept); ``curves.png`` (:func:`write_curves`)."""
     first = specs[0]
     budgets = first["budgets"]
     found = rounds(out, specs)
@@ -439,5 +442,63 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "episodes that failed because too few pursuers were left or at the step limit; CPU "
         "hours: its training's. `trials/<id>/progress.csv` is each trial's learning curve.",
     ]
+    if write_curves(out, results, budgets):
+        lines += [
+            "",
+            "![learning curves](curves.png)",
+            "",
+            "`curves.png`: each scored trial's success rate over its training episodes (lines, "
+            "one point per log row of `progress.csv`: exploration noise on, the training "
+            "protocol's rules; under the `pes` protocol the first rows are the demonstrator's "
+            "episodes) and on the held-out episodes at each budget it reached (dots).",
+        ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}
+
+
+def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
+    """``OUT/curves.png``: the training success rate (%) of every scored trial over env steps,
+    from its copied ``progress.csv``, with its held-out success rate at each budget it reached
+    as dots and the budgets as dashed lines; False (no figure) when no trial has a log."""
+    logs = {}
+    for r in results:
+        log = out / "trials" / r["id"] / "progress.csv"
+        if log.is_file():
+            data = np.atleast_1d(np.genfromtxt(log, delimiter=",", names=True))
+            if data.size and {"env_steps", "success_rate"} <= set(data.dtype.names or ()):
+                logs[r["id"]] = data
+    if not logs:
+        return False
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    for r in results:
+        if r["id"] not in logs:
+            continue
+        data = logs[r["id"]]
+        (line,) = ax.plot(
+            data["env_steps"], 100 * data["success_rate"], lw=1.2, label=r["id"], alpha=0.85
+        )
+        held = sorted((int(b), v["success_rate"]) for b, v in r["by_budget"].items())
+        ax.plot(
+            [b for b, _ in held],
+            [100 * v for _, v in held],
+            "o",
+            color=line.get_color(),
+            markeredgecolor="black",
+            markeredgewidth=0.5,
+        )
+    for b in budgets:
+        ax.axvline(b, color="grey", ls="--", lw=0.8)
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("success rate (%)")
+    ax.set_ylim(-2, 102)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, ncol=2, title="trial (line: training; dot: held-out)")
+    fig.tight_layout()
+    fig.savefig(out / "curves.png", dpi=110)
+    plt.close(fig)
+    return True
