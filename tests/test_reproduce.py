@@ -256,6 +256,25 @@ def test_tune_report_draws_every_trial_learning_curve(tmp_path):
     assert not write_curves(tmp_path, results[1:], [2000])
 
 
+def test_a_trial_that_starts_over_keeps_its_scored_log_until_the_new_one_is_longer(tmp_path):
+    from pes.experiments.tune import copy_run_log
+
+    folder = tmp_path / "t01"
+    (folder / "run").mkdir(parents=True)
+    scored = "episodes,env_steps\n50,2000\n100,4000\n"
+    (folder / "progress.csv").write_text(scored)
+    (folder / "run" / "progress.csv").write_text("episodes,env_steps\n50,2000\n")
+    (folder / "run" / "config.yaml").write_text("seed: 0\n")
+    copy_run_log(folder)
+    assert (folder / "progress.csv").read_text() == scored
+    assert not (folder / "config.yaml").exists()
+    further = scored + "150,6000\n"
+    (folder / "run" / "progress.csv").write_text(further)
+    copy_run_log(folder)
+    assert (folder / "progress.csv").read_text() == further
+    assert (folder / "config.yaml").read_text() == "seed: 0\n"
+
+
 def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, monkeypatch):
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial

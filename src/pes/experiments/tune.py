@@ -331,6 +331,20 @@ def tune(
     return write_tuning_report(out, specs, command, time.time() - start)
 
 
+def copy_run_log(folder: Path) -> None:
+    """Copy a trial's run's ``progress.csv`` and ``config.yaml`` beside its scores, unless the
+    copy there is the longer log: a trial that starts over (its checkpoint lost) keeps the log
+    of the run that was scored until the new run has logged as far."""
+    log, copy = folder / "run" / "progress.csv", folder / "progress.csv"
+    if not log.is_file():
+        return
+    if copy.is_file() and len(log.read_text().splitlines()) < len(copy.read_text().splitlines()):
+        return
+    for name in ("progress.csv", "config.yaml"):
+        if (folder / "run" / name).is_file():
+            shutil.copyfile(folder / "run" / name, folder / name)
+
+
 def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: float) -> dict:
     """``tuning.json`` and ``README.md`` of the scored trials: each trial's score at every round
     of the search it reached, the trials ranked by the furthest round they reached, then by
@@ -346,9 +360,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         if not scores:
             continue
         folder = out / "trials" / spec["id"]
-        for name in ("progress.csv", "config.yaml"):
-            if (folder / "run" / name).is_file():
-                shutil.copyfile(folder / "run" / name, folder / name)
+        copy_run_log(folder)
         last = max(scores)
         record = scores[last]
         results.append(
