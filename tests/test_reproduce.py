@@ -254,6 +254,7 @@ def test_tune_report_draws_every_trial_learning_curve(tmp_path):
     assert [list(map(float, a[0])) for a in drawn] == [[2000, 4000], [2000, 4000]]
     assert [list(map(float, a[1])) for a in drawn] == [[10.0, 50.0], [20.0, 60.0]]
     assert not write_curves(tmp_path, results[1:], [2000])
+    assert not (tmp_path / "curves.png").exists()  # no stale figure beside a report without one
 
 
 def test_a_trial_that_starts_over_keeps_its_scored_log_until_the_new_one_is_longer(tmp_path):

@@ -471,7 +471,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
 def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
     """``OUT/curves.png``: the training success rate (%) of every scored trial over env steps,
     from its copied ``progress.csv``, with its held-out success rate at each budget it reached
-    as dots and the budgets as dashed lines; False (no figure) when no trial has a log."""
+    as dots and the budgets as dashed lines; False (no figure, none left from before) when no
+    trial has logged a row."""
     logs = {}
     for r in results:
         log = out / "trials" / r["id"] / "progress.csv"
@@ -480,6 +481,7 @@ def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
             if data.size and {"env_steps", "success_rate"} <= set(data.dtype.names or ()):
                 logs[r["id"]] = data
     if not logs:
+        (out / "curves.png").unlink(missing_ok=True)
         return False
     import matplotlib  # noqa: PLC0415
 
