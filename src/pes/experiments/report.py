@@ -207,14 +207,19 @@ def table6(specs: list[dict], done: dict, meta: dict) -> str | None:
 # --- figures ---------------------------------------------------------------------------------
 
 
+def read_progress(path: Path) -> np.ndarray:
+    """A run's ``progress.csv`` as a 1-D structured array, one record per log row (named by
+    the header; empty when no row was logged yet)."""
+    return np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True))
+
+
 def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarray]]:
     """Method -> each seed's progress log as a structured array."""
     curves: dict[str, list] = {}
     for spec in specs:
         log = out / "trials" / spec["id"] / "run" / "progress.csv"
         if spec["kind"] == "train" and spec["id"] in done and log.is_file():
-            data = np.genfromtxt(log, delimiter=",", names=True)
-            curves.setdefault(spec["algo"], []).append(np.atleast_1d(data))
+            curves.setdefault(spec["algo"], []).append(read_progress(log))
     return curves
 
 

@@ -38,13 +38,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, learner_class, train
 from pes.algos.policy import load_pursuer_policy
 from pes.errors import ConfigError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, eval_config, write_json
+from pes.experiments.report import read_progress
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
 
 TUNE_EVAL_SEED = 3_000_000
@@ -477,7 +476,7 @@ def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
     for r in results:
         log = out / "trials" / r["id"] / "progress.csv"
         if log.is_file():
-            data = np.atleast_1d(np.genfromtxt(log, delimiter=",", names=True))
+            data = read_progress(log)
             if data.size and {"env_steps", "success_rate"} <= set(data.dtype.names or ()):
                 logs[r["id"]] = data
     if not logs:
