@@ -158,7 +158,7 @@ def test_budget_training_configs():
     for algo in ("cbc-tp", "ppo", "maac"):
         preset = build_train_config(algo, "quick")
         cfg = train_config({"algo": algo, "seed": 2}, BUDGETS["quick"])
-        assert cfg.env_steps == preset.env_steps == 2_000_000
+        assert cfg.env_steps == preset.env_steps == 1_000_000
         assert cfg.episodes == preset.episodes and cfg.time_limit == 0.0
         assert cfg.seed == 2 and cfg.preset == "quick" and cfg.eval_episodes == 0
     cfg = train_config({"algo": "cbc-tp", "seed": 0}, BUDGETS["paper"])
@@ -203,7 +203,7 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
         folder.mkdir(parents=True)
         train = {"episodes": 8, "env_steps": 800, "updates": 1, "cpu_s": 1.0}
         failures = {"mean_crashes": 1.0, "lost_rate": 0.5, "timeout_rate": 0.5}
-        record = {"spec": spec, "train": train, "eval": {**result, **failures}}
+        record = {"spec": spec, "env_steps": 800, "train": train, "eval": {**result, **failures}}
         write_json(folder / "result-800.json", record)
     summary = write_tuning_report(tmp_path, specs, "", 0.0)
     assert [r["id"] for r in summary["results"]] == ["t01", "t00"]
@@ -280,8 +280,9 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     """pes tune's successive halving on the tiny preset: every trial is scored at half the
     budget, the better two of three go on (resuming their own runs) to the whole budget; trial
     t00 holds the preset's own values of the search space, the others sampled settings; a
-    second call finds everything done; another budget is refused; --report-only reports what is
-    scored and runs nothing."""
+    second call finds everything done; a search of other rounds keeps the trials' scores,
+    one of other evaluations is refused; --report-only reports what is scored and runs
+    nothing."""
     import pes.experiments.tune as tune_module
     from pes.algos.ppo import PPO_PRESETS
     from pes.errors import ConfigError
@@ -330,8 +331,34 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     assert first["values"]["lr_actor"] == 1.23e-4
     assert tune("ppo", out=tmp_path, progress=False, **kwargs)["results"] == summary["results"]
     monkeypatch.undo()
+    # A search of twice the budget: its first round, 800 env steps, is scored where the
+    # trials reached it; their scores at 400 are listed beside, not ranked.
+    longer = tune(
+        "ppo",
+        out=tmp_path,
+        progress=False,
+        report_only=True,
+        **dict(kwargs, env_steps=1600),
+    )
+    assert longer["budgets"] == [800, 1600] and not longer["complete"]
+    assert {r["id"]: r["env_steps"] for r in longer["results"]} == {
+        i: 800 for i, s in reached.items() if s == 800
+    }
+    assert sorted(b["id"] for b in longer["other_budgets"]) == ["t00", "t01", "t02"]
+    # One round of half the budget: the second round's scores are listed, not ranked.
+    shorter = tune(
+        "ppo",
+        out=tmp_path,
+        progress=False,
+        report_only=True,
+        **dict(kwargs, env_steps=400, halvings=0),
+    )
+    assert shorter["complete"] and {r["env_steps"] for r in shorter["results"]} == {400}
+    further = sorted((b["id"], b["env_steps"]) for b in shorter["other_budgets"])
+    assert further == sorted((i, 800) for i, s in reached.items() if s == 800)
+    assert "outside this search's rounds" in (tmp_path / "README.md").read_text()
     with pytest.raises(ConfigError, match="other settings"):
-        tune("ppo", out=tmp_path, progress=False, **dict(kwargs, env_steps=1600))
+        tune("ppo", out=tmp_path, progress=False, **dict(kwargs, eval_episodes=3))
     (tmp_path / "trials" / "t00" / "result.json").write_text("{}")  # a CPU-minute trial's
     with pytest.raises(ConfigError, match="budgeted in CPU minutes"):
         tune("ppo", out=tmp_path, progress=False, **kwargs)

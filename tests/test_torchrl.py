@@ -331,7 +331,7 @@ def test_benchmarl_reference_run_stops_at_its_frame_budget_and_is_evaluated(tmp_
     pytest.importorskip("benchmarl")
     from pes.benchmarl.reference import quick_frames, run_reference
 
-    assert quick_frames() == 2_000_000
+    assert quick_frames() == 1_000_000
     small = {
         "on_policy_collected_frames_per_batch": 60,
         "on_policy_n_envs_per_worker": 2,

@@ -476,7 +476,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     _say(
         args,
         f"tuning {args.algo} ({args.protocol} protocol): {args.trials} trials, "
-        f"{args.halvings} halvings, up to "
+        f"{args.halvings} halving{'' if args.halvings == 1 else 's'}, up to "
         + (f"{args.env_steps:,} env steps" if args.env_steps else "the preset's env steps")
         + f" into {out}",
     )
@@ -817,16 +817,16 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive,
         default=0,
         metavar="N",
-        help="env steps of the trials that train longest (default: the preset's budget, 2,000,000 "
+        help="env steps of the trials that train longest (default: the preset's budget, 1,000,000 "
         "for quick; the other presets need it)",
     )
     p.add_argument(
         "--halvings",
         type=_non_negative,
-        default=2,
+        default=1,
         metavar="K",
-        help="rounds of successive halving before the full budget (default: 2, so 8 trials: 8 "
-        "to a quarter of --env-steps, 4 to a half, 2 to all of it; 0: every trial to all)",
+        help="rounds of successive halving before the full budget (default: 1, so 8 trials: 8 "
+        "to half of --env-steps, the better 4 to all of it; 0: every trial to all)",
     )
     p.add_argument(
         "--eval-episodes",

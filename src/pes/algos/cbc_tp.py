@@ -130,7 +130,7 @@ CBC_PRESETS: dict[str, dict[str, Any]] = {
     "quick": {**QUICK_RUN, **QUICK_LEARNER},
     "tiny": {**TINY_RUN, **TINY_LEARNER, "protocol": TINY_PROTOCOL},
 }
-"""CBC Net's presets: ``quick`` trains the shared quick budget (2,000,000 env steps)."""
+"""CBC Net's presets: ``quick`` trains the shared quick budget (1,000,000 env steps)."""
 
 TP_QUICK = dict(tp_hidden=64, lr_tp=1e-3, tp_batch_size=256, tp_update_every=4)
 CBC_TP_PRESETS: dict[str, dict[str, Any]] = {

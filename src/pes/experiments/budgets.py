@@ -64,7 +64,7 @@ BUDGETS = {
     ),
 }
 """``pes reproduce --budget``: ``paper`` trains each method with its paper preset (the paper's
-4000 episodes); ``quick`` with its whole quick preset (2,000,000 env steps, the same for every
+4000 episodes); ``quick`` with its whole quick preset (1,000,000 env steps, the same for every
 method: docs/reproduce.md). Neither has a time limit, so a trial does not depend on the
 machine's speed or load; both evaluate on 1000 episodes. ``tiny`` runs the whole pipeline in a
 minute (tests)."""

@@ -13,13 +13,15 @@ any other job.
 
 The budget is spent by successive halving: every trial trains to ``env_steps / 2**halvings``
 env steps and is scored; the better half trains on to twice that and is scored again; and so on
-until the last ``ceil(trials / 2**halvings)`` reach ``env_steps`` (8 trials, 2 halvings: 8 trials
-to a quarter of the budget, 4 to a half, 2 to all of it: four full trainings' worth). A trial
-that goes on resumes its own run, so its last score is that of one run trained straight to its
-budget. Each score is on ``eval_episodes`` held-out evaluation episodes, the same ones for
-every trial (the paper's protocol: disturbance on, crashes disable, the default evader; seeds
-never used in training or in ``pes reproduce``): success rate first, mean reward second. Every
-learner gets the same budget: the same trials, halvings, env steps and evaluation.
+until the last ``ceil(trials / 2**halvings)`` reach ``env_steps`` (8 trials, 1 halving: 8 trials
+to half the budget, the better 4 to all of it: six full trainings' worth). A trial that goes on
+resumes its own run, so its last score is that of one run trained straight to its budget. A
+trial's training and scores do not depend on the rounds after them, so a trial folder stays
+valid when the search's rounds change (only its other settings must match). Each score is on
+``eval_episodes`` held-out evaluation episodes, the same ones for every trial (the paper's
+protocol: disturbance on, crashes disable, the default evader; seeds never used in training or
+in ``pes reproduce``): success rate first, mean reward second. Every learner gets the same
+budget: the same trials, halvings, env steps and evaluation.
 
 Each trial runs in ``OUT/trials/<id>/`` (its training run in ``run/``, its score at each budget
 in ``result-<env_steps>.json``, its run's ``progress.csv`` and ``config.yaml`` copied beside
@@ -68,7 +70,7 @@ def sample(space: dict[str, tuple], rng: random.Random) -> dict[str, Any]:
 
 def rung_budgets(env_steps: int, halvings: int) -> list[int]:
     """The env steps of each round of successive halving: ``env_steps / 2**halvings``, twice
-    that, ..., ``env_steps`` (e.g. 2,000,000 and 2: 500,000, 1,000,000, 2,000,000)."""
+    that, ..., ``env_steps`` (e.g. 1,000,000 and 1: 500,000, 1,000,000)."""
     return [env_steps >> (halvings - k) for k in range(halvings + 1)]
 
 
@@ -151,10 +153,16 @@ def check_trial(out: Path, spec: dict) -> None:
             f"'{folder}' holds a trial of a search budgeted in CPU minutes; choose another --out"
         )
     for held in stored_specs(folder):
-        if held != spec:
+        if not same_trial(held, spec):
             raise ConfigError(
                 f"'{folder}' holds a trial run with other settings ({held}); choose another --out"
             )
+
+
+def same_trial(a: dict, b: dict) -> bool:
+    """Whether two trial specs train and score the same: every key but ``budgets``, the
+    search's rounds, which a trial's run and its scores at each env-step budget do not depend on."""
+    return {**a, "budgets": None} == {**b, "budgets": None}
 
 
 def stored_specs(folder: Path) -> list[dict]:
@@ -170,7 +178,7 @@ def started_values(out: Path, first: dict) -> dict[str, Any] | None:
     """The settings trial ``first`` (t00, the preset) began with in ``out``, if it began: the
     preset as it was then, which a search's best may have replaced since (None: not begun)."""
     for held in stored_specs(Path(out) / "trials" / first["id"]):
-        if {**held, "values": first["values"]} == first:  # only the values may differ
+        if same_trial({**held, "values": first["values"]}, first):  # only the values differ
             return held["values"]
     return None
 
@@ -287,7 +295,7 @@ def tune(
     algo: str,
     trials: int = 8,
     env_steps: int = 0,
-    halvings: int = 2,
+    halvings: int = 1,
     eval_episodes: int = 200,
     protocol: str = "pes",
     seed: int = 0,
@@ -389,6 +397,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
     results.sort(key=lambda r: (-r["env_steps"], -r["score"], r["id"]))
     for r in results:
         r["score"] = round(r["score"], 8)  # the reward term is 1e-5 of it
+    beyond = other_budgets(out, specs, budgets)
     finals = math.ceil(len(specs) / 2 ** (len(budgets) - 1))
     complete = pending(found) is None
     summary = {
@@ -406,6 +415,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "seconds_this_run": round(seconds, 1),
         "best": results[0]["values"] if complete else None,
         "results": results,
+        "other_budgets": beyond,
     }
     write_json(out / "tuning.json", summary)
     heads = " | ".join(f"{b:,} steps" for b in budgets)
@@ -453,6 +463,21 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "episodes that failed because too few pursuers were left or at the step limit; CPU "
         "hours: its training's. `trials/<id>/progress.csv` is each trial's learning curve.",
     ]
+    if beyond:
+        lines += [
+            "",
+            "Scored at budgets outside this search's rounds (when the search had other rounds; "
+            "not used to rank):",
+            "",
+            "| trial | env steps | success | steps | lost | step limit | CPU hours |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
+        lines += [
+            f"| {b['id']} | {b['env_steps']:,} | {100 * b['success_rate']:.1f} % | "
+            f"{b['mean_steps']:.0f} | {100 * b['lost_rate']:.1f} % | "
+            f"{100 * b['timeout_rate']:.1f} % | {b['cpu_s'] / 3600:.2f} |"
+            for b in beyond
+        ]
     if write_curves(out, results, budgets):
         lines += [
             "",
@@ -465,6 +490,30 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}
+
+
+def other_budgets(out: Path, specs: list[dict], budgets: list[int]) -> list[dict]:
+    """The scores of ``specs``' trials at env-step budgets that are not rounds of this search
+    (``result-<env_steps>.json`` kept from a search of other rounds), by trial and budget."""
+    found = []
+    for spec in specs:
+        for path in (Path(out) / "trials" / spec["id"]).glob("result-*.json"):
+            record = json.loads(path.read_text())
+            if record["env_steps"] in budgets or not same_trial(record["spec"], spec):
+                continue
+            ev = record["eval"]
+            found.append(
+                {
+                    "id": spec["id"],
+                    "env_steps": record["env_steps"],
+                    "success_rate": ev["success_rate"],
+                    "mean_steps": ev["mean_steps"],
+                    "lost_rate": ev["lost_rate"],
+                    "timeout_rate": ev["timeout_rate"],
+                    "cpu_s": record["train"]["cpu_s"],
+                }
+            )
+    return sorted(found, key=lambda b: (b["id"], b["env_steps"]))
 
 
 def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
