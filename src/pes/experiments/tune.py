@@ -478,7 +478,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
             f"{100 * b['timeout_rate']:.1f} % | {b['cpu_s'] / 3600:.2f} |"
             for b in beyond
         ]
-    if write_curves(out, results, budgets):
+    if write_curves(out, results, budgets, beyond):
         lines += [
             "",
             "![learning curves](curves.png)",
@@ -486,7 +486,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
             "`curves.png`: each scored trial's success rate over its training episodes (lines, "
             "one point per log row of `progress.csv`: exploration noise on, the training "
             "protocol's rules; under the `pes` protocol the first rows are the demonstrator's "
-            "episodes) and on the held-out episodes at each budget it reached (dots).",
+            "episodes) and on the held-out episodes at each budget it reached (dots; hollow: "
+            "outside this search's rounds).",
         ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}
@@ -516,11 +517,14 @@ def other_budgets(out: Path, specs: list[dict], budgets: list[int]) -> list[dict
     return sorted(found, key=lambda b: (b["id"], b["env_steps"]))
 
 
-def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
+def write_curves(
+    out: Path, results: list[dict], budgets: list[int], beyond: list[dict] = ()
+) -> bool:
     """``OUT/curves.png``: the training success rate (%) of every scored trial over env steps,
     from its copied ``progress.csv``, with its held-out success rate at each budget it reached
-    as dots and the budgets as dashed lines; False (no figure, none left from before) when no
-    trial has logged a row."""
+    as dots (hollow: the scores outside the search's rounds, ``beyond``, from
+    :func:`other_budgets`) and the budgets as dashed lines; False (no figure, none left from
+    before) when no trial has logged a row."""
     logs = {}
     for r in results:
         log = out / "trials" / r["id"] / "progress.csv"
@@ -552,6 +556,14 @@ def write_curves(out: Path, results: list[dict], budgets: list[int]) -> bool:
             color=line.get_color(),
             markeredgecolor="black",
             markeredgewidth=0.5,
+        )
+        further = [b for b in beyond if b["id"] == r["id"]]
+        ax.plot(
+            [b["env_steps"] for b in further],
+            [100 * b["success_rate"] for b in further],
+            "o",
+            color=line.get_color(),
+            markerfacecolor="none",
         )
     for b in budgets:
         ax.axvline(b, color="grey", ls="--", lw=0.8)
