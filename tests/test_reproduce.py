@@ -226,7 +226,8 @@ def test_tune_runs_the_trials_that_resume_first(tmp_path):
 
 
 def test_tune_report_draws_every_trial_learning_curve(tmp_path):
-    """curves.png: one training curve per trial with a log, its held-out scores as dots."""
+    """curves.png: one training curve per trial with a log, its held-out scores as dots, those
+    outside the search's rounds as hollow ones."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -248,11 +249,13 @@ def test_tune_report_draws_every_trial_learning_curve(tmp_path):
             "plot",
             lambda ax, *a, **k: drawn.append(a) or real_plot(ax, *a, **k),
         )
-        assert write_curves(tmp_path, results, [2000, 4000])
+        beyond = [{"id": "t00", "env_steps": 8000, "success_rate": 0.7}]
+        assert write_curves(tmp_path, results, [2000, 4000], beyond)
     assert (tmp_path / "curves.png").read_bytes().startswith(b"\x89PNG")
-    # t00's curve in % over env steps, then its held-out dots; t01 logged no row: nothing drawn
-    assert [list(map(float, a[0])) for a in drawn] == [[2000, 4000], [2000, 4000]]
-    assert [list(map(float, a[1])) for a in drawn] == [[10.0, 50.0], [20.0, 60.0]]
+    # t00's curve in % over env steps, its held-out dots, its score beyond the rounds; t01
+    # logged no row: nothing drawn
+    assert [list(map(float, a[0])) for a in drawn] == [[2000, 4000], [2000, 4000], [8000]]
+    assert [list(map(float, a[1])) for a in drawn] == [[10.0, 50.0], [20.0, 60.0], [70.0]]
     assert not write_curves(tmp_path, results[1:], [2000])
     assert not (tmp_path / "curves.png").exists()  # no stale figure beside a report without one
 

@@ -558,13 +558,14 @@ def write_curves(
             markeredgewidth=0.5,
         )
         further = [b for b in beyond if b["id"] == r["id"]]
-        ax.plot(
-            [b["env_steps"] for b in further],
-            [100 * b["success_rate"] for b in further],
-            "o",
-            color=line.get_color(),
-            markerfacecolor="none",
-        )
+        if further:
+            ax.plot(
+                [b["env_steps"] for b in further],
+                [100 * b["success_rate"] for b in further],
+                "o",
+                color=line.get_color(),
+                markerfacecolor="none",
+            )
     for b in budgets:
         ax.axvline(b, color="grey", ls="--", lw=0.8)
     ax.set_xlabel("env steps")
