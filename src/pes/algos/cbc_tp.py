@@ -133,9 +133,13 @@ CBC_PRESETS: dict[str, dict[str, Any]] = {
 """CBC Net's presets: ``quick`` trains the shared quick budget (1,000,000 env steps)."""
 
 TP_QUICK = dict(tp_hidden=64, lr_tp=1e-3, tp_batch_size=256, tp_update_every=4)
+CBC_TP_TUNED: dict[str, Any] = dict(lr_actor=1.8e-3, lr_critic=2.67e-3, batch_size=512, hidden=32)
+"""The best of CBC-TP Net's search (results/tuning/cbc-tp, trial t05: 93.0 % of the held-out
+episodes after 1,000,000 env steps). CBC Net keeps the untuned quick learner for its own
+search."""
 CBC_TP_PRESETS: dict[str, dict[str, Any]] = {
     "paper": PAPER_LEARNER,
-    "quick": {**CBC_PRESETS["quick"], **TP_QUICK},
+    "quick": {**CBC_PRESETS["quick"], **TP_QUICK, **CBC_TP_TUNED},
     "tiny": {**CBC_PRESETS["tiny"], "tp_hidden": 32, "tp_batch_size": 64},
 }
 """CBC-TP Net's presets: CBC Net's, with TP Net's settings."""
