@@ -373,3 +373,34 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     assert not (tmp_path / "trials" / "t03").exists()
     report = (tmp_path / "README.md").read_text()
     assert "3 of 4 trials scored; the search is not finished" in report
+
+
+def test_a_finished_trial_is_committed_but_not_its_checkpoint():
+    """A sweep committed in parts: git keeps a reproduction trial's results, logs and policy
+    (what the report needs) and leaves out the checkpoints with their replay buffers."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    if shutil.which("git") is None or not (root / ".git").exists():
+        pytest.skip("not a git checkout")
+    trial = "results/quick/trials/cbc-tp-s0"
+    paths = [
+        f"{trial}/done.json",
+        f"{trial}/eval_table4.json",
+        f"{trial}/run/policy.pt",
+        f"{trial}/run/progress.csv",
+        f"{trial}/run/checkpoint.pt",
+        "results/tuning/ddpg/trials/t00/result-500000.json",
+        "results/tuning/ddpg/trials/t00/run/checkpoint.pt",
+    ]
+    ignored = subprocess.run(
+        ["git", "-C", str(root), "check-ignore", "--no-index", *paths],
+        capture_output=True,
+        text=True,
+    ).stdout.split()
+    assert ignored == [
+        f"{trial}/run/checkpoint.pt",
+        "results/tuning/ddpg/trials/t00/run/checkpoint.pt",
+    ]
