@@ -486,8 +486,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
             "`curves.png`: each scored trial's success rate over its training episodes (lines, "
             "one point per log row of `progress.csv`: exploration noise on, the training "
             "protocol's rules; under the `pes` protocol the first rows are the demonstrator's "
-            "episodes) and on the held-out episodes at each budget it reached (dots; hollow: "
-            "outside this search's rounds).",
+            "episodes) and on the held-out episodes at each budget it reached (dots"
+            + ("; hollow: outside this search's rounds)." if beyond else ")."),
         ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}
