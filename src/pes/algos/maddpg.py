@@ -92,7 +92,10 @@ DDPG_TUNED: dict[str, Any] = dict(
 """The best of DDPG's search (results/tuning/ddpg, trial t05: 1.0 % of the held-out episodes
 after 1,000,000 env steps)."""
 
-DDPG_PRESETS: dict[str, dict[str, Any]] = {**MADDPG_PRESETS, "quick": {**MLP_QUICK, **DDPG_TUNED}}
+DDPG_PRESETS: dict[str, dict[str, Any]] = {
+    **MADDPG_PRESETS,
+    "quick": {**MLP_QUICK, **DDPG_TUNED},
+}
 """DDPG's presets: MADDPG's, with the quick one of DDPG's own search."""
 
 
