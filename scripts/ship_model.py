@@ -29,6 +29,7 @@ import shutil
 import sys
 from pathlib import Path
 
+import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -123,15 +124,75 @@ def pid_pf_lines() -> list[str]:
     ]
 
 
-def main() -> None:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("name", choices=sorted(SHIPPED))
-    parser.add_argument("policy", help="the policy file to ship")
-    parser.add_argument("--command", required=True, help="the exact training command")
+    parser.add_argument("policy", nargs="?", help="the policy file to ship")
+    parser.add_argument("--command", help="the exact training command")
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--seed", type=int, default=0, help="evaluation seed")
     parser.add_argument("--note", default="", help="how this file was chosen (model card)")
+    parser.add_argument(
+        "--card-only",
+        action="store_true",
+        help="ship and evaluate nothing: rewrite the model card from results/shipped_NAME.json "
+        "(and, for the swarm, the reproduction in results/quick/)",
+    )
+    return parser
+
+
+def reproduction_lines() -> list[str]:
+    """Model-card lines: the swarm's ``quick`` preset trained from scratch, as the reproduction
+    in ``results/quick/`` measured it (every finished CBC-TP Net seed, mean ± sample std), so
+    that the card quotes what the README and results/README.md quote."""
+    path = ROOT / "results" / "quick" / "evals.json"
+    if not path.is_file():
+        return []
+    found = json.loads(path.read_text())
+    trials = [trial for key, trial in sorted(found.items()) if key.startswith("cbc-tp-s")]
+    if not trials:
+        return []
+
+    def stat(kind: str, field: str, scale: float, digits: int) -> str:
+        values = np.array([scale * t["evals"][kind][field] for t in trials])
+        std = values.std(ddof=1) if len(values) > 1 else 0.0
+        return f"{values.mean():.{digits}f} ± {std:.{digits}f}"  # as the reproduction's tables
+
+    rows = [
+        f"| {k} damaged | {stat(kind, 'success_rate', 100, 1)} % "
+        f"| {stat(kind, 'mean_steps', 1, 0)} |"
+        for k, kind in enumerate(("table4", "damaged1", "damaged2"))
+        if all(kind in t["evals"] for t in trials)
+    ]
+    return [
+        "",
+        "## The `quick` preset trained from scratch",
+        "",
+        f"This file is a longer training's pick. The `quick` preset itself (1,000,000 env steps "
+        f"under the `pes` protocol, one torch thread), trained from scratch on {len(trials)} "
+        "seeds by `pes reproduce table4 --methods cbc-tp --seeds 3 --out results/quick` and "
+        "evaluated as above (1000 episodes per row, against the default evader), captures "
+        "(mean ± std over seeds; results/quick/evals.json):",
+        "",
+        "| setting | success rate | mean steps |",
+        "| --- | --- | --- |",
+        *rows,
+    ]
+
+
+def main() -> None:
+    parser = build_parser()
     args = parser.parse_args()
+    out = ROOT / "results" / f"shipped_{args.name.replace('-', '_')}.json"
+    if args.card_only:
+        if not out.is_file():
+            parser.error(f"--card-only: {out} does not exist (ship the model first)")
+        record = json.loads(out.read_text())
+        shipped_args = parser.parse_args(shlex.split(record["eval_command"])[2:])
+        write_card(shipped_args, record)
+        return
+    if args.policy is None or args.command is None:
+        parser.error("give the policy file and --command (or --card-only)")
     torch.set_num_threads(2)
 
     target = MODELS_DIR / SHIPPED[args.name]
@@ -179,11 +240,28 @@ def main() -> None:
         "evaluations": evals,
         "eval_command": shlex.join(["python", "scripts/ship_model.py", *sys.argv[1:]]),
     }
-    out = ROOT / "results" / f"shipped_{args.name.replace('-', '_')}.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps(record, indent=2) + "\n")
+    write_card(args, record)
+    print(
+        json.dumps(
+            {
+                k: {m: v[m] for m in ("success_rate", "mean_steps", "mean_reward")}
+                for k, v in evals.items()
+            },
+            indent=2,
+        )
+    )
 
+
+def write_card(args: argparse.Namespace, record: dict) -> None:
+    """Write ``src/pes/models/NAME.md`` from the shipping ``args`` and the evaluation
+    ``record`` (what ``results/shipped_NAME.json`` holds)."""
+    target = MODELS_DIR / SHIPPED[args.name]
+    info = describe(target)
     cfg = info["train_config"]
+    meta, machine, evals = record["train_meta"], record["machine"], record["evaluations"]
+    default = EnvConfig().for_evaluation().replace(evader_policy="ddpg").evader_model
     lines = [
         f"# Model card: `{args.name}`",
         "",
@@ -194,7 +272,14 @@ def main() -> None:
         "",
         f"* command: `{args.command}`",
         f"* algorithm `{cfg['algo']}`, preset `{cfg['preset']}`, protocol "
-        f"`{cfg['protocol']['name']}`, seed {cfg['seed']}; "
+        f"`{cfg['protocol']['name']}`"
+        + (
+            " (the file predates training protocols: the command and the scenario overrides "
+            "say how it trained)"
+            if cfg["protocol"]["name"] == "unrecorded"
+            else ""
+        )
+        + f", seed {cfg['seed']}; "
         f"scenario overrides: `{json.dumps(cfg['env'])}`",
         f"* {meta.get('episodes')} episodes, {meta.get('env_steps')} env steps, "
         f"{meta.get('updates')} updates, {meta.get('wall_s')} s wall time"
@@ -228,20 +313,13 @@ def main() -> None:
             + ", ".join(f"{k} damaged {s} % / {t} steps" for k, (s, t) in PAPER_TABLE_VI.items())
             + ".",
             *pid_pf_lines(),
+            *reproduction_lines(),
         ]
     else:
         lines += ["", "Success rate here is the pursuers' (lower means a stronger evader)."]
-    lines += ["", f"Made by: `{record['eval_command']}`; numbers in `results/{out.name}`.", ""]
+    name = f"shipped_{args.name.replace('-', '_')}.json"
+    lines += ["", f"Made by: `{record['eval_command']}`; numbers in `results/{name}`.", ""]
     (MODELS_DIR / f"{SHIPPED[args.name].removesuffix('.pt')}.md").write_text("\n".join(lines))
-    print(
-        json.dumps(
-            {
-                k: {m: v[m] for m in ("success_rate", "mean_steps", "mean_reward")}
-                for k, v in evals.items()
-            },
-            indent=2,
-        )
-    )
 
 
 if __name__ == "__main__":

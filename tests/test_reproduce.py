@@ -92,6 +92,12 @@ def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_pa
     assert summary["ran"] == 0 and summary["skipped"] == 3 and summary["unfinished"] == 3
     assert "Seeds per method: PID(PF) 1" in (out / "table4.md").read_text()
     assert not (out / "trials" / "cbc-s1").exists()
+    # A part of the sweep (--methods) reports every finished trial in the folder.
+    reproduce(
+        "table4", budget="tiny", seeds=1, out=out, methods=["pid-pf"], use_ray=False,
+        report_only=True,
+    )  # fmt: skip
+    assert "| CBC-TP Net |" in (out / "table4.md").read_text()
     # Outside reference runs (the records pes.benchmarl.reference writes) as Table IV columns;
     # the evaluation of PID(PF)'s trial stands in for a reference run's here.
     pid_eval = json.loads((out / "evals.json").read_text())["pid-pf-s0"]["evals"]["table4"]

@@ -101,7 +101,13 @@ def reproduce(
     finally:
         view.close()
     seconds = time.time() - start
-    report = write_report(out, specs, target, budget, seeds, command, seconds, protocol, outside)
+    # The report shows every finished trial of the whole programme in ``out``, not only the
+    # methods asked for now, so that a sweep run in parts (``--methods``) keeps one report.
+    wanted = {*available_methods(), *methods}
+    everything = trials_for(target, [m for m in METHODS if m in wanted], seeds, budget, protocol)
+    report = write_report(
+        out, everything, target, budget, seeds, command, seconds, protocol, outside
+    )
     return {
         "target": target,
         "budget": budget,
