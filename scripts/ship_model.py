@@ -255,8 +255,13 @@ def main() -> None:
 
 
 def write_card(args: argparse.Namespace, record: dict) -> None:
-    """Write ``src/pes/models/NAME.md`` from the shipping ``args`` and the evaluation
-    ``record`` (what ``results/shipped_NAME.json`` holds)."""
+    """Write the model card ``src/pes/models/NAME.md`` (:func:`card`)."""
+    (MODELS_DIR / f"{SHIPPED[args.name].removesuffix('.pt')}.md").write_text(card(args, record))
+
+
+def card(args: argparse.Namespace, record: dict) -> str:
+    """The model card of the shipping ``args`` and the evaluation ``record`` (what
+    ``results/shipped_NAME.json`` holds), as Markdown."""
     target = MODELS_DIR / SHIPPED[args.name]
     info = describe(target)
     cfg = info["train_config"]
@@ -319,7 +324,7 @@ def write_card(args: argparse.Namespace, record: dict) -> None:
         lines += ["", "Success rate here is the pursuers' (lower means a stronger evader)."]
     name = f"shipped_{args.name.replace('-', '_')}.json"
     lines += ["", f"Made by: `{record['eval_command']}`; numbers in `results/{name}`.", ""]
-    (MODELS_DIR / f"{SHIPPED[args.name].removesuffix('.pt')}.md").write_text("\n".join(lines))
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

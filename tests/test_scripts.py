@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -13,10 +14,12 @@ import torch
 from pes.algos import build_train_config, train
 from pes.algos.policy import load_pursuer_policy
 from pes.learn.checkpoint import POLICY_FORMAT
+from pes.models import MODELS_DIR
 from pes.sim.config import EnvConfig
 from tests.learning import FAST
 
-SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPTS = ROOT / "scripts"
 
 
 def _script(name: str):
@@ -42,6 +45,18 @@ def test_ship_file_of_a_checkpoint_keeps_the_acting_networks(tmp_path):
     assert meta["torch"] == str(torch.__version__)
     _, cfg = load_pursuer_policy(target, EnvConfig())
     assert cfg.seed == 3
+
+
+def test_the_swarm_s_model_card_quotes_its_evaluation_and_the_reproduction():
+    """The committed card of the shipped swarm is what ``ship_model.py --card-only`` writes
+    from results/shipped_cbc_tp.json and the reproduction's results/quick/evals.json, so it
+    quotes the numbers those files hold."""
+    ship = _script("ship_model")
+    record = json.loads((ROOT / "results" / "shipped_cbc_tp.json").read_text())
+    args = ship.build_parser().parse_args(shlex.split(record["eval_command"])[2:])
+    text = ship.card(args, record)
+    assert "## The `quick` preset trained from scratch" in text
+    assert text == (MODELS_DIR / "cbc_tp.md").read_text()
 
 
 def test_pick_evader_prefers_the_paper_s_steps_to_a_crash_heavy_match():
