@@ -71,6 +71,10 @@ def test_all_targets_sequential(sweep):
     assert meta["trial_configs"]["cbc-tp-s0"]["protocol"]["name"].startswith("pes")
     assert meta["trial_configs"]["pid-pf-s0"] is None
     assert "failed: step limit (PES)" in table4 and "crashes per episode (PES)" in table4
+    # What each method's training cost, beside its results (PID(PF) does not train).
+    cost = next(line for line in table4.splitlines() if line.startswith("| training env steps"))
+    assert cost.split(" | ")[1] == "—" and all(c.strip(" |") != "—" for c in cost.split(" | ")[2:])
+    assert "| training CPU minutes (PES) |" in table4
 
 
 @pytest.mark.slow

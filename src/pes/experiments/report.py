@@ -54,6 +54,22 @@ def _fmt(values: list[float], scale: float = 1.0, digits: int = 1, unit: str = "
     return f"{mean:.{digits}f} ± {std:.{digits}f}{unit}"
 
 
+def _fmt_count(values: list[int]) -> str:
+    """A count with thousands separators: the one value, or mean ± std when they differ."""
+    if not values:
+        return "—"
+    if len(set(values)) == 1:
+        return f"{values[0]:,}"
+    mean, std = _stats(values)
+    return f"{mean:,.0f} ± {std:,.0f}"
+
+
+def _training(specs: list[dict], done: dict, algo: str) -> list[dict]:
+    """The training records (``env_steps``, ``cpu_s``, ...) of ``algo``'s finished trials."""
+    records = (done.get(spec["id"]) for spec in specs if spec["algo"] == algo)
+    return [rec["train"] for rec in records if rec is not None and rec.get("train")]
+
+
 def _paper(value: float | None, scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
     return "—" if value is None else f"{value * scale:.{digits}f}{unit}"
 
@@ -136,6 +152,21 @@ def table4(
             for evals in columns.values()
         ]
         lines.append(f"| {label} | " + " | ".join(ours) + " |")
+    # What training cost: every learner gets the same env steps, not the same CPU time.
+    costs = {LABELS[m]: _training(specs, done, m) for m in methods}
+    costs.update(
+        {
+            label: [{"env_steps": r["frames"], "cpu_s": r.get("cpu_s")} for r in runs]
+            for label, runs in outside.items()
+        }
+    )
+    steps = [_fmt_count([c["env_steps"] for c in costs[col]]) for col in columns]
+    minutes = [
+        _fmt([c["cpu_s"] / 60 for c in costs[col] if c.get("cpu_s") is not None], digits=0)
+        for col in columns
+    ]
+    lines.append("| training env steps (PES) | " + " | ".join(steps) + " |")
+    lines.append("| training CPU minutes (PES) | " + " | ".join(minutes) + " |")
     lines += [
         "",
         "Seeds per method: " + ", ".join(f"{c} {len(e)}" for c, e in columns.items()) + ".",
