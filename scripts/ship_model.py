@@ -171,7 +171,8 @@ def reproduction_lines() -> list[str]:
         f"This file is a longer training's pick. The `quick` preset itself (1,000,000 env steps "
         f"under the `pes` protocol, one torch thread), trained from scratch on {len(trials)} "
         "seeds by `pes reproduce table4 --methods cbc-tp --seeds 3 --out results/quick` and "
-        "evaluated as above (1000 episodes per row, against the default evader), captures "
+        "evaluated as the rows above (1000 episodes per row, disturbance on, crashes disable, "
+        "against the default evader; the reproduction's evaluation seeds), captures "
         "(mean ± std over seeds; results/quick/evals.json):",
         "",
         "| setting | success rate | mean steps |",
