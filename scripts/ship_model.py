@@ -5,6 +5,7 @@
     python scripts/ship_model.py evader-ddpg-paper runs/evader-snap/snapshots/epNNNNNN.pt \
         --command "pes train --algo evader-ddpg ... && python scripts/pick_evader.py ..."
     python scripts/ship_model.py cbc-tp runs/cbc_tp/best_policy.pt --command "pes train ..."
+    python scripts/ship_model.py cbc-tp --card-only   # the card again, from the saved numbers
 
 Copies the policy file to ``src/pes/models/`` (given a training checkpoint, writes a policy
 file of its acting networks, the actor and TP Net, with the checkpoint's counters), evaluates
@@ -18,6 +19,10 @@ numbers (``results/shipped_NAME.json``):
   damaged (Table VI), against ``flee``, and against the fully trained evader (``evader-ddpg``)
   at its 12 m/s and with its top speed capped below (the speeds of
   ``pes.experiments.calibration``, where PID(PF)'s numbers for the same evaders are).
+
+The swarm's card also quotes what its ``quick`` preset captures when trained from scratch, from
+the reproduction in ``results/quick/evals.json``: rewrite the card with ``--card-only`` whenever
+that reproduction changes (a test holds the committed card to it).
 """
 
 from __future__ import annotations
