@@ -29,3 +29,13 @@ def test_readme_starts_with_the_two_commands():
     # the extras' resolution must not replace the CPU build of torch with a CUDA one
     install = 'pip install torch==2.13.0 && pip install torch==2.13.0 -e ".[test,benchmarl]"'
     assert install in head and install in ci
+
+
+def test_the_results_readme_quotes_the_reproduction_s_table_iv():
+    """results/README.md shows Table IV as the reproduction's report has it (copy the table's
+    rows from results/quick/table4.md after each `pes reproduce --report-only`)."""
+    report = (ROOT / "results" / "quick" / "table4.md").read_text()
+    rows = [line for line in report.splitlines() if line.startswith("|")]
+    readme = (ROOT / "results" / "README.md").read_text()
+    quoted = readme[readme.index("Table IV so far") :].split("\n\n")[1]
+    assert quoted.splitlines() == rows
