@@ -34,7 +34,6 @@ import shutil
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,6 +46,7 @@ from pes.experiments.calibration import (  # noqa: E402
     PAPER_EVADER_CASE,
     evader_speed_case,
 )
+from pes.experiments.report import over_seeds  # noqa: E402
 from pes.learn.checkpoint import (  # noqa: E402
     CHECKPOINT_FORMAT,
     POLICY_FORMAT,
@@ -154,17 +154,15 @@ def reproduction_lines() -> list[str]:
     if not path.is_file():
         return []
     found = json.loads(path.read_text())
-    trials = [trial for key, trial in sorted(found.items()) if key.startswith("cbc-tp-s")]
+    trials = [t for _, t in sorted(found.items()) if (t.get("train") or {}).get("algo") == "cbc-tp"]
     if not trials:
         return []
 
-    def stat(kind: str, field: str, scale: float, digits: int) -> str:
-        values = np.array([scale * t["evals"][kind][field] for t in trials])
-        std = values.std(ddof=1) if len(values) > 1 else 0.0
-        return f"{values.mean():.{digits}f} ± {std:.{digits}f}"  # as the reproduction's tables
+    def stat(kind: str, field: str, scale: float, digits: int, unit: str = "") -> str:
+        return over_seeds([t["evals"][kind][field] for t in trials], scale, digits, unit)
 
     rows = [
-        f"| {k} damaged | {stat(kind, 'success_rate', 100, 1)} % "
+        f"| {k} damaged | {stat(kind, 'success_rate', 100, 1, ' %')} "
         f"| {stat(kind, 'mean_steps', 1, 0)} |"
         for k, kind in enumerate(("table4", "damaged1", "damaged2"))
         if all(kind in t["evals"] for t in trials)

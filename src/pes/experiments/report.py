@@ -45,7 +45,9 @@ def _stats(values: list[float]) -> tuple[float, float]:
     return float(arr.mean()), float(arr.std(ddof=1)) if len(arr) > 1 else 0.0
 
 
-def _fmt(values: list[float], scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
+def over_seeds(values: list[float], scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
+    """``values`` (one per seed) times ``scale`` as the reports show them: "mean ± sample std",
+    the value alone for one seed, "—" for none."""
     if not values:
         return "—"
     mean, std = _stats([v * scale for v in values])
@@ -135,7 +137,9 @@ def table4(
         ("average reward", "mean_reward", 1.0, 3, ""),
     )
     for label, key, scale, digits, unit in metrics:
-        ours = [_fmt([r[key] for r in evals], scale, digits, unit) for evals in columns.values()]
+        ours = [
+            over_seeds([r[key] for r in evals], scale, digits, unit) for evals in columns.values()
+        ]
         paper = [
             _paper(paper_of[c][key], scale, digits, unit) if c in paper_of else "—" for c in columns
         ]
@@ -148,7 +152,7 @@ def table4(
     )
     for label, key, scale, digits, unit in failures:
         ours = [
-            _fmt([r[key] for r in evals if key in r], scale, digits, unit)
+            over_seeds([r[key] for r in evals if key in r], scale, digits, unit)
             for evals in columns.values()
         ]
         lines.append(f"| {label} | " + " | ".join(ours) + " |")
@@ -162,7 +166,7 @@ def table4(
     )
     steps = [_fmt_count([c["env_steps"] for c in costs[col]]) for col in columns]
     minutes = [
-        _fmt([c["cpu_s"] / 60 for c in costs[col] if c.get("cpu_s") is not None], digits=0)
+        over_seeds([c["cpu_s"] / 60 for c in costs[col] if c.get("cpu_s") is not None], digits=0)
         for col in columns
     ]
     lines.append("| training env steps (PES) | " + " | ".join(steps) + " |")
@@ -204,8 +208,10 @@ def table5(specs: list[dict], done: dict, meta: dict) -> str | None:
     )
     lines += ["| | k = 1 | k = 2 | k = 3 | k = 4 | k = 5 |", "| --- |" + " --- |" * 5]
     for key in ("fde", "ade"):
-        ours = [_fmt([r[key][k] for r in recs], digits=4) for k in range(5)]
-        const = [_fmt([r["constant_position"][key][k] for r in recs], digits=4) for k in range(5)]
+        ours = [over_seeds([r[key][k] for r in recs], digits=4) for k in range(5)]
+        const = [
+            over_seeds([r["constant_position"][key][k] for r in recs], digits=4) for k in range(5)
+        ]
         lines.append(f"| {key.upper()} (PES) | " + " | ".join(ours) + " |")
         lines.append(f"| {key.upper()} (paper) | " + " | ".join(f"{v:.3f}" for v in TABLE5[key]))
         lines[-1] += " |"
@@ -227,9 +233,9 @@ def table6(specs: list[dict], done: dict, meta: dict) -> str | None:
     ]
     for k, recs in rows.items():
         lines.append(
-            f"| {k} | {_fmt([r['success_rate'] for r in recs], 100.0, 1, ' %')} "
-            f"| {100 * TABLE6[k][0]:.1f} % | {_fmt([r['mean_steps'] for r in recs], digits=0)} "
-            f"| {TABLE6[k][1]} |"
+            f"| {k} | {over_seeds([r['success_rate'] for r in recs], 100.0, 1, ' %')} "
+            f"| {100 * TABLE6[k][0]:.1f} % "
+            f"| {over_seeds([r['mean_steps'] for r in recs], digits=0)} | {TABLE6[k][1]} |"
         )
     lines.append("")
     return "\n".join(lines)
