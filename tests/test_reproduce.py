@@ -414,3 +414,28 @@ def test_a_finished_trial_is_committed_but_not_its_checkpoint():
         f"{trial}/run/checkpoint.pt",
         "results/tuning/ddpg/trials/t00/run/checkpoint.pt",
     ]
+
+
+def test_set_changes_every_learner_s_training_and_a_folder_keeps_one_choice(sweep, tmp_path):
+    """``--set`` changes the training of every learner (not PID(PF)), the trials record it, the
+    report names it, and a folder made with other settings is refused, not mixed."""
+    changes = {"protocol.n_step": 1, "protocol.demonstrations": None, "env.crash_mode": "continue"}
+    specs = make_trials(["pid-pf", "maddpg"], 1, "quick", False, "pes", changes)
+    assert "set" not in specs[0] and specs[1]["set"] == changes
+    cfg = train_config(specs[1], BUDGETS["quick"])
+    assert cfg.protocol.n_step == 1 and cfg.protocol.demonstrations is None
+    assert cfg.env_config().crash_mode == "continue" and cfg.protocol.greedy_envs > 0
+
+    argv = ["reproduce", "table4", "--budget", "tiny", "--seeds", "1", "--no-ray", "--json"]
+    argv += ["--methods", "maddpg", "--out", str(tmp_path), "--set", "protocol.n_step=1"]
+    assert main(argv) == 0
+    trial = tmp_path / "trials" / "maddpg-s0"
+    assert json.loads((trial / "done.json").read_text())["spec"]["set"] == {"protocol.n_step": 1}
+    assert "n_step: 1" in (trial / "run" / "config.yaml").read_text()
+    assert "`--set protocol.n_step=1`" in (tmp_path / "table4.md").read_text()
+    assert json.loads((tmp_path / "reproduce.json").read_text())["overrides"] == {
+        "protocol.n_step": 1
+    }
+    out, _ = sweep
+    with pytest.raises(pes.errors.ConfigError, match="cbc-s0 .* was made with other settings"):
+        reproduce("table4", budget="tiny", seeds=1, out=out, methods=["cbc"], overrides=changes)

@@ -455,6 +455,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         report_only=args.report_only,
         protocol=args.protocol,
         outside=args.outside,
+        overrides=dict(parse_override(text) for text in args.overrides),
     )
     if args.json:
         _print_json(summary)
@@ -785,6 +786,16 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="outside reference runs (python -m pes.benchmarl.reference, one subfolder each) "
         "to show beside the methods in Table IV",
+    )
+    p.add_argument(
+        "--set",
+        metavar="KEY=VALUE",
+        action="append",
+        default=[],
+        dest="overrides",
+        help="change a setting of every learner's training, as pes train --set (repeatable), "
+        "e.g. --set protocol.n_step=1 to take an aid away; the report names the changes; "
+        "use a new --out for each choice",
     )
     p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

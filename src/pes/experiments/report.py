@@ -85,12 +85,18 @@ def _by_method(specs: list[dict], done: dict, kind: str = "table4") -> dict[str,
     return out
 
 
+def _changed(meta: dict) -> str:
+    """`` with --set k=v ...`` for the settings every learner's training changed, else ``""``."""
+    pairs = meta.get("overrides") or {}
+    return " with " + " ".join(f"`--set {k}={v}`" for k, v in pairs.items()) if pairs else ""
+
+
 def _header(title: str, meta: dict) -> list[str]:
     return [
         f"# {title}",
         "",
         f"Budget `{meta['budget']}`, every learner trained under the `{meta['protocol']}` "
-        f"protocol, {meta['seeds']} seed(s); each evaluation "
+        f"protocol{_changed(meta)}, {meta['seeds']} seed(s); each evaluation "
         f"{meta['eval_episodes']} episodes with disturbance, crashes disable, against the "
         f"{meta['evader']}. Mean ± std over seeds. Made by `{meta['command']}` "
         f"({meta['hardware']}).",
@@ -424,9 +430,11 @@ def write_report(
     seconds: float,
     protocol: str = "pes",
     outside: str | Path | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> list[str]:
     """Write every table and figure the finished trials allow; returns the files written.
-    ``outside``: a folder of outside reference runs for Table IV (:func:`load_outside`)."""
+    ``outside``: a folder of outside reference runs for Table IV (:func:`load_outside`).
+    ``overrides``: the ``--set`` keys every learner's training changed (named in the tables)."""
     done = _load(out, specs)
     references = load_outside(outside)
     machine = machine_info()
@@ -434,6 +442,7 @@ def write_report(
     meta = {
         "budget": budget,
         "protocol": protocol,
+        "overrides": dict(overrides or {}),
         "seeds": seeds,
         "eval_episodes": BUDGETS[budget].eval_episodes,
         "evader": (

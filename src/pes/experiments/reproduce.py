@@ -13,6 +13,7 @@ finished trials and resumes the interrupted ones from their checkpoints. The rep
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 from typing import Any
@@ -34,9 +35,15 @@ def available_methods() -> list[str]:
 
 
 def trials_for(
-    target: str, methods: list[str], seeds: int, budget: str, protocol: str = "pes"
+    target: str,
+    methods: list[str],
+    seeds: int,
+    budget: str,
+    protocol: str = "pes",
+    overrides: dict[str, Any] | None = None,
 ) -> list[dict]:
-    """The trial specs a target needs, the learners trained under ``protocol``."""
+    """The trial specs a target needs, the learners trained under ``protocol`` with
+    ``overrides`` (``pes train --set`` keys)."""
     if target not in TARGETS:
         raise ConfigError(f"target must be one of {', '.join(TARGETS)}, got '{target}'")
     if target == "table6":
@@ -45,7 +52,22 @@ def trials_for(
             raise ConfigError("table6 needs the cbc-tp method")
     elif target == "table5":
         methods = []
-    return make_trials(methods, seeds, budget, target in ("table5", "all"), protocol)
+    tpnet = target in ("table5", "all")
+    return make_trials(methods, seeds, budget, tpnet, protocol, overrides)
+
+
+def check_finished(out: Path, specs: list[dict]) -> None:
+    """Raise :class:`ConfigError` if a finished trial in ``out`` was made with another spec
+    (another protocol or other ``--set`` keys) than the one asked for now."""
+    for spec in specs:
+        done = out / "trials" / spec["id"] / "done.json"
+        if done.is_file():
+            made = json.loads(done.read_text())["spec"]
+            if made != spec:
+                raise ConfigError(
+                    f"trial {spec['id']} in {out} was made with other settings ({made}, not "
+                    f"{spec}); use another --out"
+                )
 
 
 def reproduce(
@@ -62,6 +84,7 @@ def reproduce(
     report_only: bool = False,
     protocol: str | None = None,
     outside: str | Path | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
@@ -72,6 +95,9 @@ def reproduce(
     ``report_only``: run nothing; write the report of the trials finished so far.
     ``outside``: a folder of outside reference runs (``python -m pes.benchmarl.reference``, one
     subfolder each) that Table IV shows as extra columns.
+    ``overrides``: settings changed for every learner's training (``pes train --set`` keys,
+    e.g. ``{"protocol.n_step": 1}`` to take an aid away); the report names them. A folder holds
+    one such choice: finished trials made with other settings are an error.
     """
     if budget not in BUDGETS:
         raise ConfigError(f"budget must be one of {', '.join(BUDGETS)}, got '{budget}'")
@@ -84,8 +110,9 @@ def reproduce(
         raise ConfigError(f"--outside: no folder '{outside}'")
     use_ray = choose_runner(use_ray, ray_address)
     methods = list(methods) if methods else available_methods()
-    specs = trials_for(target, methods, seeds, budget, protocol)
+    specs = trials_for(target, methods, seeds, budget, protocol, overrides)
     out = Path(out)
+    check_finished(out, specs)
     out.mkdir(parents=True, exist_ok=True)
     todo = [s for s in specs if not (out / "trials" / s["id"] / "done.json").is_file()]
     finished = len(specs) - len(todo)
@@ -104,14 +131,17 @@ def reproduce(
     # The report shows every finished trial of the whole programme in ``out``, not only the
     # methods asked for now, so that a sweep run in parts (``--methods``) keeps one report.
     wanted = {*available_methods(), *methods}
-    everything = trials_for(target, [m for m in METHODS if m in wanted], seeds, budget, protocol)
+    everything = trials_for(
+        target, [m for m in METHODS if m in wanted], seeds, budget, protocol, overrides
+    )
     report = write_report(
-        out, everything, target, budget, seeds, command, seconds, protocol, outside
+        out, everything, target, budget, seeds, command, seconds, protocol, outside, overrides
     )
     return {
         "target": target,
         "budget": budget,
         "protocol": protocol,
+        "overrides": dict(overrides or {}),
         "seeds": seeds,
         "out": str(out),
         "runner": "ray" if use_ray else "sequential",

@@ -49,10 +49,16 @@ def trial_id(kind: str, algo: str, seed: int) -> str:
 
 
 def make_trials(
-    methods: list[str], seeds: int, budget: str, tpnet: bool, protocol: str = "pes"
+    methods: list[str],
+    seeds: int,
+    budget: str,
+    tpnet: bool,
+    protocol: str = "pes",
+    overrides: dict[str, Any] | None = None,
 ) -> list[dict]:
     """The trial specs (JSON-friendly dicts) for ``methods`` x ``seeds`` (and Table V's); the
-    learners train under ``protocol``."""
+    learners train under ``protocol`` with ``overrides`` (``pes train --set`` keys, e.g.
+    ``{"protocol.n_step": 1}``) on top of their presets, kept in the spec as ``set``."""
     for algo in methods:
         if algo != "pid-pf" and algo not in ALGOS:
             raise ConfigError(f"unknown method '{algo}' (available: pid-pf, {', '.join(ALGOS)})")
@@ -74,6 +80,8 @@ def make_trials(
             spec["budget"] = budget
             if kind == "train":
                 spec["protocol"] = protocol
+                if overrides:
+                    spec["set"] = dict(overrides)
             specs.append(spec)
     return specs
 
@@ -143,9 +151,10 @@ def _run_policy_trial(
 
 def train_config(spec: dict, budget: Budget, threads: int = 0):
     """The :class:`pes.learn.config.TrainConfig` of a ``train`` trial: the method's preset of
-    the budget's name, the budget's overrides, the seed."""
+    the budget's name, the budget's overrides, the seed, the spec's ``set`` keys."""
     values = {**budget.train, "seed": spec["seed"], "eval_episodes": 0, "threads": threads}
     values["env"] = dict(budget.train.get("env", {}))
+    values.update(spec.get("set", {}))
     protocol = spec.get("protocol")
     return build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
 
