@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from pes.sim._numba_substeps import vehicle_substeps
+from pes.sim import _numba_substeps as ss
 
 _ZERO, _ONE, _TWO = np.float32(0.0), np.float32(1.0), np.float32(2.0)
 _INF, _BIG = np.float32(np.inf), np.float32(1e6)
@@ -171,7 +171,15 @@ def flee(vehicles, alive, rays, box_grown, box_centre, width_in, height_in, marg
     influence, repulsion, open_space, escape, accel = p[3], p[4], p[5], p[6], p[7]
     out_x = np.empty(num_envs, np.float32)
     out_y = np.empty(num_envs, np.float32)
+    # the rays' columns, each contiguous, and per ray the numbers of the ray casts
+    ux, uy = rays[:, 0].copy(), rays[:, 1].copy()
+    inv_x, inv_y = rays[:, 2].copy(), rays[:, 3].copy()
+    flat_x = (rays[:, 4] == 1) | (rays[:, 4] == 3)
+    flat_y = (rays[:, 4] == 2) | (rays[:, 4] == 3)
     free = np.empty(num_rays, np.float32)
+    t_min = np.empty(num_rays, np.float32)
+    gap = np.empty(num_rays, np.float32)
+    scores = np.empty(num_rays, np.float32)
     for e in range(num_envs):
         ex, ey = vehicles[0, e, n], vehicles[1, e, n]
         evx, evy = vehicles[2, e, n], vehicles[3, e, n]
@@ -198,57 +206,58 @@ def flee(vehicles, alive, rays, box_grown, box_centre, width_in, height_in, marg
         push = push * push / d
         away_x = away_x - repulsion * push * vehicles[14, e, n]
         away_y = away_y - repulsion * push * vehicles[15, e, n]
-        # Ray casts (pes.sim.geometry.ray_distance).
+        # Ray casts (pes.sim.geometry.ray_distance), all rays at once: the loops over the rays
+        # are innermost and branch-free (selects; & and | rather than and and or), so that
+        # LLVM vectorises them; each ray's operations and their order are those of one ray.
         for m in range(num_rays):
-            ux, uy, inv_x, inv_y, flat = rays[m, 0], rays[m, 1], rays[m, 2], rays[m, 3], rays[m, 4]
-            wall_x = (width_in - ex) * inv_x if ux > _ZERO else (margin - ex) * inv_x
-            wall_y = (height_in - ey) * inv_y if uy > _ZERO else (margin - ey) * inv_y
-            if flat == 1 or flat == 3:
-                wall_x = lookahead
-            if flat == 2 or flat == 3:
-                wall_y = lookahead
+            wall_x = (width_in - ex) * inv_x[m] if ux[m] > _ZERO else (margin - ex) * inv_x[m]
+            wall_y = (height_in - ey) * inv_y[m] if uy[m] > _ZERO else (margin - ey) * inv_y[m]
+            wall_x = lookahead if flat_x[m] else wall_x
+            wall_y = lookahead if flat_y[m] else wall_y
             dist = wall_x if wall_x <= wall_y else wall_y
-            if dist < _ZERO:
-                dist = _ZERO
-            if dist > lookahead:
-                dist = lookahead
-            if num_boxes > 0:
-                t_min = _INF
-                for b in range(num_boxes):
-                    tx0 = (box_grown[b, 0] - ex) * inv_x
-                    tx1 = (box_grown[b, 2] - ex) * inv_x
-                    ty0 = (box_grown[b, 1] - ey) * inv_y
-                    ty1 = (box_grown[b, 3] - ey) * inv_y
-                    t_enter = max(min(tx0, tx1), min(ty0, ty1))
-                    t_exit = min(max(tx0, tx1), max(ty0, ty1))
-                    hit = t_enter <= t_exit and t_exit > _ZERO
-                    towards = ux * (box_centre[b, 0] - ex) + uy * (box_centre[b, 1] - ey) > _ZERO
-                    hit = hit and (not t_enter < _ZERO or towards)
-                    t_hit = (t_enter if t_enter > _ZERO else _ZERO) if hit else lookahead
-                    if t_hit < t_min:
-                        t_min = t_hit
-                if t_min < dist:
-                    dist = t_min
-            free[m] = dist
+            dist = _ZERO if dist < _ZERO else dist
+            free[m] = lookahead if dist > lookahead else dist
+            t_min[m] = _INF
+        for b in range(num_boxes):
+            x0, y0, x1, y1 = box_grown[b, 0], box_grown[b, 1], box_grown[b, 2], box_grown[b, 3]
+            to_x, to_y = box_centre[b, 0] - ex, box_centre[b, 1] - ey
+            for m in range(num_rays):
+                tx0, tx1 = (x0 - ex) * inv_x[m], (x1 - ex) * inv_x[m]
+                ty0, ty1 = (y0 - ey) * inv_y[m], (y1 - ey) * inv_y[m]
+                t_enter = max(min(tx0, tx1), min(ty0, ty1))
+                t_exit = min(max(tx0, tx1), max(ty0, ty1))
+                hit = (t_enter <= t_exit) & (t_exit > _ZERO)
+                towards = ux[m] * to_x + uy[m] * to_y > _ZERO
+                hit = hit & ((not t_enter < _ZERO) | towards)
+                t_hit = (t_enter if t_enter > _ZERO else _ZERO) if hit else lookahead
+                t_min[m] = t_hit if t_hit < t_min[m] else t_min[m]
+        if num_boxes > 0:
+            for m in range(num_rays):
+                free[m] = t_min[m] if t_min[m] < free[m] else free[m]
+        # Each ray's smallest gap to an alive pursuer's position extrapolated to the time the
+        # evader takes to run the ray's free length, then its score.
+        for m in range(num_rays):
+            gap[m] = _BIG
+        for i in range(n):
+            if alive[e, i]:
+                px, py = vehicles[0, e, i], vehicles[1, e, i]
+                pvx, pvy = vehicles[2, e, i], vehicles[3, e, i]
+                for m in range(num_rays):
+                    t = free[m] / max_speed
+                    gx = (ex + ux[m] * free[m]) - (px + pvx * t)
+                    gy = (ey + uy[m] * free[m]) - (py + pvy * t)
+                    g = gx * gx + gy * gy
+                    gap[m] = g if g < gap[m] else gap[m]
+        for m in range(num_rays):
+            score = ux[m] * away_x + uy[m] * away_y
+            score = score + open_space * free[m] / lookahead
+            root = np.sqrt(gap[m])
+            score = score + escape * (root if root < _FORTY else _FORTY) / _FORTY
+            scores[m] = score - _TWO * (_ONE if free[m] < _TWO else _ZERO)
         best, best_score = 0, -_INF
         for m in range(num_rays):
-            ux, uy = rays[m, 0], rays[m, 1]
-            t = free[m] / max_speed
-            gap = _BIG
-            for i in range(n):
-                if alive[e, i]:
-                    gx = (ex + ux * free[m]) - (vehicles[0, e, i] + vehicles[2, e, i] * t)
-                    gy = (ey + uy * free[m]) - (vehicles[1, e, i] + vehicles[3, e, i] * t)
-                    g = gx * gx + gy * gy
-                    if g < gap:
-                        gap = g
-            score = ux * away_x + uy * away_y
-            score = score + open_space * free[m] / lookahead
-            root = np.sqrt(gap)
-            score = score + escape * (root if root < _FORTY else _FORTY) / _FORTY
-            score = score - _TWO * (_ONE if free[m] < _TWO else _ZERO)
-            if score > best_score or m == 0:
-                best, best_score = m, score
+            if scores[m] > best_score or m == 0:
+                best, best_score = m, scores[m]
         best_free = free[best] / np.float32(3.0)
         target_speed = max_speed * (best_free if best_free < _ONE else _ONE)
         ax = (rays[best, 0] * target_speed - evx) / accel
@@ -276,12 +285,19 @@ def move(vehicles, actions, evader_ax, evader_ay, alive0, fx, fy, params, max_sp
     Returns the first 13 fields after the step, (13, E, A), dead pursuers not yet held.
     """
     num_envs, n = alive0.shape
+    num_vehicles = n + 1
+    total = num_envs * num_vehicles
     h, b, kp, ki, kd, tilt = p[0], p[1], p[2], p[3], p[4], p[5]
     disturbed = fx.shape[0] > 0
-    out = np.empty((13, num_envs, n + 1), np.float32)
-    trig = np.empty(6, np.float32)
-    for e in range(num_envs):
-        for a in range(n + 1):
+    out = np.empty((13, num_envs, num_vehicles), np.float32)
+    buf = np.empty(ss.ROWS * ss.BLOCK, np.float32)
+    # Blocks of BLOCK (environment, vehicle) pairs in the order of the state: each vehicle's
+    # commands (scalar: atan and cos are the C library's), then the sub-steps of the whole
+    # block at once (vectorised, ss.block_substeps), then the block's results out.
+    for start in range(0, total, ss.BLOCK):
+        count = min(ss.BLOCK, total - start)
+        for j in range(count):
+            e, a = (start + j) // num_vehicles, (start + j) % num_vehicles
             if a < n:
                 on = _ONE if alive0[e, a] else _ZERO
                 ax, ay = actions[e, a, 0] * on, actions[e, a, 1] * on
@@ -301,29 +317,20 @@ def move(vehicles, actions, evader_ax, evader_ay, alive0, fx, fy, params, max_sp
             ex, ey = _ZERO, _ZERO
             if disturbed:
                 ex, ey = fx[e, a] * on / params[1, a], fy[e, a] * on / params[1, a]
-            for k in range(3):
-                trig[k] = np.cos(vehicles[4 + k, e, a])
-                trig[3 + k] = np.sin(vehicles[4 + k, e, a])
-            moved = vehicle_substeps(
-                vehicles[:, e, a],
-                trig,
-                roll_ref,
-                pitch_ref,
-                ex,
-                ey,
-                params[2, a],
-                params[3, a],
-                params[4, a],
-                max_speed[a],
-                h,
-                b,
-                kp,
-                ki,
-                kd,
-                n_sub,
-            )
             for f in range(13):
-                out[f, e, a] = moved[f]
+                buf[f * ss.BLOCK + j] = vehicles[f, e, a]
+            for k in range(3):
+                buf[ss.COS_R + k * ss.BLOCK + j] = np.cos(vehicles[4 + k, e, a])
+                buf[ss.SIN_R + k * ss.BLOCK + j] = np.sin(vehicles[4 + k, e, a])
+            buf[ss.ROLL_REF + j], buf[ss.PITCH_REF + j] = roll_ref, pitch_ref
+            buf[ss.EX + j], buf[ss.EY + j] = ex, ey
+            buf[ss.G_ROLL + j], buf[ss.G_PITCH + j] = params[2, a], params[3, a]
+            buf[ss.G_YAW + j], buf[ss.VMAX + j] = params[4, a], max_speed[a]
+        ss.block_substeps(buf, count, h, b, kp, ki, kd, n_sub)
+        for j in range(count):
+            e, a = (start + j) // num_vehicles, (start + j) % num_vehicles
+            for f in range(13):
+                out[f, e, a] = buf[f * ss.BLOCK + j]
     return out
 
 
