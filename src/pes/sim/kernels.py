@@ -5,7 +5,9 @@ An eager torch step spends most of its time dispatching small operations (SPEC Â
 docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
 whatever its size. On the CPU, when torch is not compiling the step, those parts run here
 instead, as Numba functions that walk every environment once and keep each vehicle's numbers
-in registers.
+in registers, but for the physics sub-steps and the ``flee`` evader's ray casts, which run
+across blocks of vehicles and across the rays so that LLVM vectorises them (same operations,
+same order, same bits).
 
 The kernels repeat the torch code's float32 arithmetic operation by operation, in the same
 order and with the same roundings (a scalar times a tensor rounds the scalar to float32 first;
