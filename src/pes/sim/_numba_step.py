@@ -24,39 +24,119 @@ _INF, _BIG = np.float32(np.inf), np.float32(1e6)
 _TINY_NORM, _MIN_DIST = np.float32(1e-9), np.float32(1e-3)
 _CAP, _FORTY, _SOFTPLUS_LINEAR = np.float32(1.5), np.float32(40.0), np.float32(20.0)
 _MIN_GAP, _GRAVITY = np.float32(1e-6), np.float32(9.81)
+_EXP_ZERO = np.float32(-110.0)  # exp of less is below half the least float32: rounds to +0
+_WALL_NX = np.array([1.0, -1.0, 0.0, 0.0], np.float32)  # the walls' normals: left, right,
+_WALL_NY = np.array([0.0, 0.0, 1.0, -1.0], np.float32)  # bottom, top
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # IEEE division, as torch
 
 
+# The rows of :func:`_block_contacts`'s block (ss.BLOCK vehicles, a row of ss.BLOCK numbers
+# each, at these constant offsets in one flat array, as in ``ss.block_substeps``): position,
+# velocity, 1 for a pursuer (0 for the evader); the nearest obstacle's distance and normal; the
+# inward speed, the hit and touched flags (0 or 1), the push's two components, the nearest
+# building's distance and normal, and the distances of the walls (left, right, bottom, top).
+# The buildings' distances and normals are rows of three other arrays.
+(_X, _Y, _VX, _VY, _PURSUER, _D, _NX, _NY, _INWARD, _HIT, _TOUCHED, _PUSH_X, _PUSH_Y) = (
+    k * ss.BLOCK for k in range(13)
+)
+_BOX_D, _BOX_NX, _BOX_NY, _LEFT, _RIGHT, _BOTTOM, _TOP = (k * ss.BLOCK for k in range(13, 20))
+_ROWS = 20
+
+
 @_jit
-def obstacles(px, py, cx, cy, hx, hy, width, height, dist, nx, ny):
-    """Signed distance and outward normal of every obstacle from (px, py): the B buildings of
-    centres (cx, cy) and half sizes (hx, hy), then the walls (left, right, bottom, top), into
-    ``dist``, ``nx``, ``ny`` (B + 4,) (:func:`pes.sim.geometry.obstacle_distances_xy`)."""
-    num_boxes = cx.shape[0]
+def box_distance(px, py, cx, cy, hx, hy):
+    """Signed distance and outward normal (x, y) of the building of centre (cx, cy) and half
+    sizes (hx, hy) from (px, py) (:func:`pes.sim.geometry.obstacle_distances_xy`), without a
+    branch."""
+    rx, ry = px - cx, py - cy
+    ex, ey = abs(rx) - hx, abs(ry) - hy
+    sx = _ONE if rx >= _ZERO else -_ONE
+    sy = _ONE if ry >= _ZERO else -_ONE
+    ox = ex if ex > _ZERO else _ZERO
+    oy = ey if ey > _ZERO else _ZERO
+    out_len = np.sqrt(ox * ox + oy * oy)
+    inner = ex if ex >= ey else ey
+    inner = _ZERO if inner > _ZERO else inner
+    inv = _ONE / (out_len if out_len > np.float32(1e-12) else np.float32(1e-12))
+    along_x = ex >= ey
+    nx = sx * ox * inv if out_len > _ZERO else (sx if along_x else _ZERO)
+    ny = sy * oy * inv if out_len > _ZERO else (_ZERO if along_x else sy)
+    return out_len + inner, nx, ny
+
+
+@_jit
+def _block_contacts(buf, box_d, box_nx, box_ny, count, boxes, width, height, radius, radius_gap):
+    """The push out of the nearest obstacle of the first ``count`` vehicles of the block
+    ``buf`` (rows above), in place: each obstacle's distance and normal (the buildings' into
+    ``box_d``, ``box_nx``, ``box_ny`` (B, ss.BLOCK)), the nearest (with :func:`nearest`'s
+    choice on ties), the push along its normal, the velocity then (a pursuer's zero, the
+    evader's slid along the obstacle), the obstacles' distances after the push and whether
+    one is still within ``radius`` (then ``collide`` resolves the vehicle on its own). Each
+    loop runs over the block's vehicles, innermost and without a branch, so that LLVM
+    vectorises it; per vehicle the operations and their order are those of one vehicle at a
+    time (same bits)."""
+    num_boxes = boxes.shape[0]
     for b in range(num_boxes):
-        rx, ry = px - cx[b], py - cy[b]
-        ex, ey = abs(rx) - hx[b], abs(ry) - hy[b]
-        sx = _ONE if rx >= _ZERO else -_ONE
-        sy = _ONE if ry >= _ZERO else -_ONE
-        ox = ex if ex > _ZERO else _ZERO
-        oy = ey if ey > _ZERO else _ZERO
-        out_len = np.sqrt(ox * ox + oy * oy)
-        inner = ex if ex >= ey else ey
-        if inner > _ZERO:
-            inner = _ZERO
-        dist[b] = out_len + inner
-        inv = _ONE / (out_len if out_len > np.float32(1e-12) else np.float32(1e-12))
-        if out_len > _ZERO:
-            nx[b], ny[b] = sx * ox * inv, sy * oy * inv
-        elif ex >= ey:
-            nx[b], ny[b] = sx, _ZERO
+        cx, cy, hx, hy = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
+        row_d, row_nx, row_ny = box_d[b], box_nx[b], box_ny[b]
+        if b == 0:
+            for j in range(count):
+                d, nx, ny = box_distance(buf[_X + j], buf[_Y + j], cx, cy, hx, hy)
+                row_d[j], row_nx[j], row_ny[j] = d, nx, ny
+                buf[_BOX_D + j], buf[_BOX_NX + j], buf[_BOX_NY + j] = d, nx, ny
         else:
-            nx[b], ny[b] = _ZERO, sy
-    dist[num_boxes], nx[num_boxes], ny[num_boxes] = px, _ONE, _ZERO
-    dist[num_boxes + 1], nx[num_boxes + 1], ny[num_boxes + 1] = width - px, -_ONE, _ZERO
-    dist[num_boxes + 2], nx[num_boxes + 2], ny[num_boxes + 2] = py, _ZERO, _ONE
-    dist[num_boxes + 3], nx[num_boxes + 3], ny[num_boxes + 3] = height - py, _ZERO, -_ONE
+            for j in range(count):
+                d, nx, ny = box_distance(buf[_X + j], buf[_Y + j], cx, cy, hx, hy)
+                row_d[j], row_nx[j], row_ny[j] = d, nx, ny
+                closer = d < buf[_BOX_D + j]
+                buf[_BOX_D + j] = d if closer else buf[_BOX_D + j]
+                buf[_BOX_NX + j] = nx if closer else buf[_BOX_NX + j]
+                buf[_BOX_NY + j] = ny if closer else buf[_BOX_NY + j]
+    for j in range(count):
+        # The walls (left, right, bottom, top), then the nearest of walls and buildings.
+        px, py = buf[_X + j], buf[_Y + j]
+        left, right, bottom, top = px, width - px, py, height - py
+        d, nx, ny = left, _ONE, _ZERO
+        closer = right < d
+        d, nx, ny = (right if closer else d), (-_ONE if closer else nx), (_ZERO if closer else ny)
+        closer = bottom < d
+        d, nx, ny = (bottom if closer else d), (_ZERO if closer else nx), (_ONE if closer else ny)
+        closer = top < d
+        d, nx, ny = (top if closer else d), (_ZERO if closer else nx), (-_ONE if closer else ny)
+        if num_boxes > 0:
+            closer = buf[_BOX_D + j] < d
+            d = buf[_BOX_D + j] if closer else d
+            nx = buf[_BOX_NX + j] if closer else nx
+            ny = buf[_BOX_NY + j] if closer else ny
+        # Push out of the nearest obstacle along its normal.
+        hit = d < radius
+        push = radius_gap - d if hit else _ZERO
+        buf[_X + j], buf[_Y + j] = px + nx * push, py + ny * push
+        buf[_D + j], buf[_NX + j], buf[_NY + j] = d + push, nx, ny
+        vx, vy = buf[_VX + j], buf[_VY + j]
+        inward = min(vx * nx + vy * ny, _ZERO)
+        pursuer = buf[_PURSUER + j] != _ZERO
+        slide_x, slide_y = vx - inward * nx, vy - inward * ny
+        buf[_VX + j] = (_ZERO if pursuer else slide_x) if hit else vx
+        buf[_VY + j] = (_ZERO if pursuer else slide_y) if hit else vy
+        buf[_INWARD + j], buf[_HIT + j] = inward, _ONE if hit else _ZERO
+        # The walls' distances after the push (as the buildings' below, normals and all).
+        push_x, push_y = nx * push, ny * push
+        buf[_PUSH_X + j], buf[_PUSH_Y + j] = push_x, push_y
+        left = left + _ONE * push_x + _ZERO * push_y
+        right = right + -_ONE * push_x + _ZERO * push_y
+        bottom = bottom + _ZERO * push_x + _ONE * push_y
+        top = top + _ZERO * push_x + -_ONE * push_y
+        buf[_LEFT + j], buf[_RIGHT + j], buf[_BOTTOM + j], buf[_TOP + j] = left, right, bottom, top
+        touched = (left < radius) | (right < radius) | (bottom < radius) | (top < radius)
+        buf[_TOUCHED + j] = _ONE if touched else _ZERO
+    for b in range(num_boxes):
+        row_d, row_nx, row_ny = box_d[b], box_nx[b], box_ny[b]
+        for j in range(count):
+            d = row_d[j] + row_nx[j] * buf[_PUSH_X + j] + row_ny[j] * buf[_PUSH_Y + j]
+            row_d[j] = d
+            buf[_TOUCHED + j] = _ONE if d < radius else buf[_TOUCHED + j]
 
 
 @_jit
@@ -93,7 +173,11 @@ def _per_axis(moves):
 def _softplus_term(distance, safe, k):
     """``scenario.softplus_obstacle_term``: softplus((safe - distance) / k) * k."""
     z = (safe - distance) / k
-    return (z if z > _SOFTPLUS_LINEAR else np.log1p(np.exp(z))) * k
+    if z > _SOFTPLUS_LINEAR:
+        return z * k
+    if z < _EXP_ZERO:  # exp(z) rounds to +0 and log1p(+0) is +0: the same bits, no calls
+        return _ZERO * k
+    return np.log1p(np.exp(z)) * k
 
 
 @_jit
@@ -377,77 +461,90 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
     positions = np.empty((num_envs, num_vehicles, 2), np.float32)
     velocities = np.empty((num_envs, num_vehicles, 2), np.float32)
 
+    # Every (environment, vehicle) i = e * A + a in the order of the state: the dynamics'
+    # fields for the active ones, the dead pursuers held where they were, at rest.
+    total = num_envs * num_vehicles
+    active = np.empty(total, np.bool_)
+    for e in range(num_envs):
+        for a in range(num_vehicles):
+            active[e * num_vehicles + a] = a == n or alive0[e, a]
+    moved_flat, before = moved.reshape(13, total), vehicles.reshape(16, total)
+    out_flat = out_v.reshape(16, total)
+    for f in range(13):
+        for i in range(total):
+            held = before[f, i] if f < 2 else _ZERO
+            out_flat[f, i] = moved_flat[f, i] if active[i] else held
+    at, speed = positions.reshape(total, 2), velocities.reshape(total, 2)
+    contact = np.empty(total, np.bool_)
+    dist = np.empty(total, np.float32)
+    inward = np.empty(total, np.float32)
+
+    # The contacts by blocks of ss.BLOCK vehicles (:func:`_block_contacts`), all obstacles of
+    # the block at once; then the rare vehicle that touches a second obstacle on its own.
+    buf = np.empty(_ROWS * ss.BLOCK, np.float32)
+    box_d = np.empty((num_boxes, ss.BLOCK), np.float32)
+    box_nx = np.empty((num_boxes, ss.BLOCK), np.float32)
+    box_ny = np.empty((num_boxes, ss.BLOCK), np.float32)
     dists = np.empty(num_obstacles, np.float32)
     nxs = np.empty(num_obstacles, np.float32)
     nys = np.empty(num_obstacles, np.float32)
     moves = np.empty(num_obstacles, np.float32)
     inward_e = np.empty(num_obstacles, np.float32)
-    inward = np.empty(num_vehicles, np.float32)
-    dist = np.empty(num_vehicles, np.float32)
-    contact = np.empty(num_vehicles, np.bool_)
-    cx, cy, hx, hy = boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3]
+    nxs[num_boxes:], nys[num_boxes:] = _WALL_NX, _WALL_NY
+    for start in range(0, total, ss.BLOCK):
+        count = min(ss.BLOCK, total - start)
+        for j in range(count):
+            i = start + j
+            buf[_X + j], buf[_Y + j] = out_flat[0, i], out_flat[1, i]
+            buf[_VX + j], buf[_VY + j] = out_flat[2, i], out_flat[3, i]
+            buf[_PURSUER + j] = _ONE if i % num_vehicles < n else _ZERO
+        _block_contacts(buf, box_d, box_nx, box_ny, count, boxes, width, height, radius, radius_gap)
+        for j in range(count):
+            if buf[_TOUCHED + j] == _ZERO:
+                continue
+            # Out of every other obstacle still within the radius (resolve_contacts).
+            for k in range(num_boxes):
+                dists[k], nxs[k], nys[k] = box_d[k, j], box_nx[k, j], box_ny[k, j]
+            dists[num_boxes], dists[num_boxes + 1] = buf[_LEFT + j], buf[_RIGHT + j]
+            dists[num_boxes + 2], dists[num_boxes + 3] = buf[_BOTTOM + j], buf[_TOP + j]
+            x, y, vx, vy = buf[_X + j], buf[_Y + j], buf[_VX + j], buf[_VY + j]
+            for k in range(num_obstacles):
+                moves[k] = nxs[k] * (radius_gap - dists[k] if dists[k] < radius else _ZERO)
+            step_x = _per_axis(moves)
+            for k in range(num_obstacles):
+                moves[k] = nys[k] * (radius_gap - dists[k] if dists[k] < radius else _ZERO)
+            step_y = _per_axis(moves)
+            x, y = x + step_x, y + step_y
+            over = dists < radius
+            for k in range(num_obstacles):
+                dists[k] = dists[k] + nxs[k] * step_x + nys[k] * step_y
+            if buf[_PURSUER + j] != _ZERO:
+                vx, vy = _ZERO, _ZERO
+            else:
+                for k in range(num_obstacles):
+                    toward = min(vx * nxs[k] + vy * nys[k], _ZERO)
+                    inward_e[k] = toward if over[k] else _ZERO
+                for k in range(num_obstacles):
+                    moves[k] = inward_e[k] * nxs[k]
+                slide_x = vx - _per_axis(moves)
+                for k in range(num_obstacles):
+                    moves[k] = inward_e[k] * nys[k]
+                vx, vy = slide_x, vy - _per_axis(moves)
+            index = nearest(dists, num_boxes)
+            buf[_X + j], buf[_Y + j], buf[_VX + j], buf[_VY + j] = x, y, vx, vy
+            buf[_D + j], buf[_NX + j], buf[_NY + j] = dists[index], nxs[index], nys[index]
+        for j in range(count):
+            i = start + j
+            x, y, vx, vy = buf[_X + j], buf[_Y + j], buf[_VX + j], buf[_VY + j]
+            d, nx, ny = buf[_D + j], buf[_NX + j], buf[_NY + j]
+            contact[i] = buf[_HIT + j] != _ZERO or buf[_TOUCHED + j] != _ZERO
+            dist[i], inward[i] = d, buf[_INWARD + j]
+            out_flat[0, i], out_flat[1, i], out_flat[2, i], out_flat[3, i] = x, y, vx, vy
+            out_flat[13, i], out_flat[14, i], out_flat[15, i] = d, -nx * d, -ny * d
+            at[i, 0], at[i, 1], speed[i, 0], speed[i, 1] = x, y, vx, vy
 
     for e in range(num_envs):
-        for a in range(num_vehicles):
-            active = a == n or alive0[e, a]
-            for f in range(13):
-                if active:
-                    out_v[f, e, a] = moved[f, e, a]
-                else:
-                    out_v[f, e, a] = vehicles[f, e, a] if f < 2 else _ZERO
-            x, y, vx, vy = out_v[0, e, a], out_v[1, e, a], out_v[2, e, a], out_v[3, e, a]
-            # Push out of the nearest obstacle along its normal.
-            obstacles(x, y, cx, cy, hx, hy, width, height, dists, nxs, nys)
-            index = nearest(dists, num_boxes)
-            d, nx, ny = dists[index], nxs[index], nys[index]
-            hit = d < radius
-            push = radius_gap - d if hit else _ZERO
-            x, y = x + nx * push, y + ny * push
-            d = d + push
-            inward[a] = min(vx * nx + vy * ny, _ZERO)
-            if hit and a < n:
-                vx, vy = _ZERO, _ZERO
-            elif hit:
-                vx, vy = vx - inward[a] * nx, vy - inward[a] * ny
-            for k in range(num_obstacles):
-                dists[k] = dists[k] + nxs[k] * (nx * push) + nys[k] * (ny * push)
-            # Then out of every other obstacle still within the radius (resolve_contacts).
-            touched = False
-            for k in range(num_obstacles):
-                if dists[k] < radius:
-                    touched = True
-            if touched:
-                for k in range(num_obstacles):
-                    moves[k] = nxs[k] * (radius_gap - dists[k] if dists[k] < radius else _ZERO)
-                step_x = _per_axis(moves)
-                for k in range(num_obstacles):
-                    moves[k] = nys[k] * (radius_gap - dists[k] if dists[k] < radius else _ZERO)
-                step_y = _per_axis(moves)
-                x, y = x + step_x, y + step_y
-                over = dists < radius
-                for k in range(num_obstacles):
-                    dists[k] = dists[k] + nxs[k] * step_x + nys[k] * step_y
-                if a < n:
-                    vx, vy = _ZERO, _ZERO
-                else:
-                    for k in range(num_obstacles):
-                        toward = min(vx * nxs[k] + vy * nys[k], _ZERO)
-                        inward_e[k] = toward if over[k] else _ZERO
-                    for k in range(num_obstacles):
-                        moves[k] = inward_e[k] * nxs[k]
-                    slide_x = vx - _per_axis(moves)
-                    for k in range(num_obstacles):
-                        moves[k] = inward_e[k] * nys[k]
-                    vx, vy = slide_x, vy - _per_axis(moves)
-                index = nearest(dists, num_boxes)
-                d, nx, ny = dists[index], nxs[index], nys[index]
-            contact[a] = hit or touched
-            dist[a] = d
-            out_v[0, e, a], out_v[1, e, a], out_v[2, e, a], out_v[3, e, a] = x, y, vx, vy
-            out_v[13, e, a], out_v[14, e, a], out_v[15, e, a] = d, -nx * d, -ny * d
-            positions[e, a, 0], positions[e, a, 1] = x, y
-            velocities[e, a, 0], velocities[e, a, 1] = vx, vy
-
+        base = e * num_vehicles
         step = counters[3, e] + 1
         damaged_now = step >= counters[6, e]
         ex, ey = out_v[0, e, n], out_v[1, e, n]
@@ -455,7 +552,7 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
         nearest_gap = _INF
         crash_count = 0
         for i in range(n):
-            crashed[e, i] = contact[i] and alive0[e, i]
+            crashed[e, i] = contact[base + i] and alive0[e, i]
             crash_count += 1 if crashed[e, i] else 0
             on = alive0[e, i] and not (disable and crashed[e, i])
             alive[e, i] = on and not (damage_mask[e, i] and damaged_now)
@@ -472,7 +569,7 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
         success[e] = hold >= capture_hold
         terminated[e] = success[e] or alive_count < capture_count
         truncated[e] = step >= max_steps and not terminated[e]
-        evader_contact[e] = contact[n]
+        evader_contact[e] = contact[base + n]
 
         # Rewards, eqs. (8)-(9).
         paid_sum = _ZERO
@@ -499,12 +596,12 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
                 chaser = alive0[e, i] and distances[e, i] == nearest_gap
                 if not chaser:
                     own = np.sqrt(lead_x * lead_x + lead_y * lead_y)
-            r_self = -(self_rho * own + _softplus_term(dist[i], safe, k_soft))
+            r_self = -(self_rho * own + _softplus_term(dist[base + i], safe, k_soft))
             if approach != _ZERO:
-                gap = dist[i] - radius
+                gap = dist[base + i] - radius
                 if gap < _ZERO:
                     gap = _ZERO
-                over = -inward[i] - np.sqrt(two_decel * gap)
+                over = -inward[base + i] - np.sqrt(two_decel * gap)
                 r_self = r_self - approach * (over if over > _ZERO else _ZERO)
             r = r_co + r_self
             if encircle != _ZERO:
@@ -515,8 +612,8 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
         gap_paid = nearest_gap if alive0_any else _ZERO
         evader_reward[e] = (
             rho * gap_paid
-            - _softplus_term(dist[n], safe, k_soft)
-            + e_crash_r * (_ONE if contact[n] else _ZERO)
+            - _softplus_term(dist[base + n], safe, k_soft)
+            + e_crash_r * (_ONE if contact[base + n] else _ZERO)
             + e_capture_r * (_ONE if success[e] else _ZERO)
         )
         out_c[3, e], out_c[4, e], out_c[5, e] = step, hold, counters[5, e] + crash_count
@@ -532,6 +629,7 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
             out_h[e, frames - 1, a, 1] = out_v[1, e, a] / height * keep
             out_h[e, frames - 1, a, 2] = out_v[2, e, a] / vscale * keep
             out_h[e, frames - 1, a, 3] = out_v[3, e, a] / vscale * keep
+
     return (
         out_v,
         out_c,
