@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -147,3 +148,31 @@ def test_torch_loop_still_serves_float64_and_gradients(torch_loop):
     out = quadrotor_step(v, ax, ax * 0, ax * 0, ax * 0, sc.params, 0.1, 10)
     assert out.x.requires_grad and out.vx[0, 0] > 0
     assert GRAVITY > 0
+
+
+def test_a_new_compilation_clears_the_cached_code_of_both_kernel_modules_and_nothing_else(
+    tmp_path,
+):
+    """Numba keys a function's cache on its own source file: ``move`` inlines the sub-steps of
+    _numba_substeps.py, so a compilation for new sources removes both modules' cached code
+    first (in the folders where Numba keeps it), and leaves every other file alone."""
+    assert kernels.wait()
+    folders = kernels._cache_folders()
+    assert any(any(Path(f).glob("_numba_step.move-*.nbi")) for f in folders)
+    stale = [
+        "_numba_step.move-356.py311.nbi",
+        "_numba_step.move-356.py311.1.nbc",
+        "_numba_substeps.block_substeps-44.py311.nbi",
+        "_numba_substeps.block_substeps-44.py311.2.nbc",
+    ]
+    kept = [
+        "_numba_step.py",
+        "_numba_stepper.f-1.py311.nbi",
+        "other._numba_step.f-1.py311.nbc",
+        "evader.f-3.py311.nbi",
+        "pes-kernels-0123456789abcdef.ready",
+    ]
+    for name in stale + kept:
+        (tmp_path / name).touch()
+    kernels.clear_cache([tmp_path, tmp_path / "missing"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept)

@@ -5,9 +5,9 @@ An eager torch step spends most of its time dispatching small operations (SPEC Â
 docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
 whatever its size. On the CPU, when torch is not compiling the step, those parts run here
 instead, as Numba functions that walk every environment once and keep each vehicle's numbers
-in registers, but for the physics sub-steps and the ``flee`` evader's ray casts, which run
-across blocks of vehicles and across the rays so that LLVM vectorises them (same operations,
-same order, same bits).
+in registers, but for the physics sub-steps, the distances to the obstacles and the push out
+of them, and the ``flee`` evader's ray casts, which run across blocks of vehicles and across
+the rays so that LLVM vectorises them (same operations, same order, same bits).
 
 The kernels repeat the torch code's float32 arithmetic operation by operation, in the same
 order and with the same roundings (a scalar times a tensor rounds the scalar to float32 first;
@@ -22,9 +22,11 @@ The kernels are in :mod:`pes.sim._numba_substeps` and :mod:`pes.sim._numba_step`
 first use only (so that ``import pes`` does not import Numba). Numba compiles them once per
 machine (some 20-35 s on a 2-core machine) and caches the machine code (beside those files, or in
 ``NUMBA_CACHE_DIR``); a file ``pes-kernels-<key>.ready`` there says that a compilation
-finished for these sources, this Python and this Numba. When the first step finds no such file
-it does not wait: a background process compiles the kernels while the steps run in torch, and
-the steps switch to the kernels once it is done. :func:`wait` loads them first, compiling them
+finished for these sources, this Python and this Numba (a compilation for sources without one
+first removes the cached code of both files, as Numba keys each function on its own file only:
+:func:`clear_cache`). When the first step finds no such file it does not wait: a background
+process compiles the kernels while the steps run in torch, and the steps switch to the kernels
+once it is done. :func:`wait` loads them first, compiling them
 if need be: evaluations, trainings, ``pes bench`` and the demo call it, so that their figures
 never depend on when a compilation finished. ``PES_KERNELS=0`` in the environment, or a
 missing ``numba``, selects the torch code.
@@ -32,6 +34,7 @@ missing ``numba``, selects the torch code.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.metadata
 import os
@@ -110,6 +113,36 @@ def ready_marker() -> Path:
     return root / f"pes-kernels-{key.hexdigest()[:16]}.ready"
 
 
+def _cache_folders() -> set[Path]:
+    """The folders where Numba caches the machine code of the kernels' modules (beside them
+    in ``__pycache__``, under ``NUMBA_CACHE_DIR`` or in the user's folder), as Numba's own
+    cache of each module's functions says; imports Numba."""
+    from pes.sim import _numba_step, _numba_substeps
+
+    try:
+        return {Path(f._cache.cache_path) for f in (_numba_step.collide, _numba_substeps.substeps)}
+    except AttributeError:  # a Numba that keeps it elsewhere: nothing found to clear
+        return set()
+
+
+def clear_cache(folders) -> None:
+    """Remove Numba's cached machine code of the kernels' modules (the index ``.nbi`` and data
+    ``.nbc`` files of ``_numba_step`` and ``_numba_substeps``) from ``folders``, and nothing
+    else. Numba keys a function's cache on its own source file only: ``move`` in
+    _numba_step.py inlines ``block_substeps`` of _numba_substeps.py, and would load the
+    machine code of the old sub-steps after a change of that file alone. So a compilation for
+    sources with no ready marker (:func:`ready_marker` keys on both files) first clears both
+    modules' cache, and compiles every kernel anew."""
+    for folder in folders:
+        for name in _SOURCES:
+            module = name.removesuffix(".py")
+            for pattern in (f"{module}.*.nbi", f"{module}.*.nbc"):
+                for path in Path(folder).glob(pattern):
+                    # another process may have removed it first, or it may not be ours to
+                    with contextlib.suppress(OSError):
+                        path.unlink()
+
+
 def _load():
     """The module of the step's kernels if they serve now, else None: loaded from the cache
     when a compilation is marked ready, otherwise a background compilation started (or
@@ -157,9 +190,15 @@ def _compile_here() -> None:
     if _step is not None or _failed:
         return
     try:
+        marked = ready_marker().is_file()
+    except (OSError, importlib.metadata.PackageNotFoundError):
+        marked = True
+    try:
         from pes.sim import _numba_step
         from pes.sim._numba_substeps import substeps
 
+        if not marked:  # new sources: none of the cached machine code may serve
+            clear_cache(_cache_folders())
         f32 = np.float32
         vehicles, cube = np.ones((16, 1, 2), np.float32), np.zeros((13, 1, 2), np.float32)
         alive = np.ones((1, 1), np.bool_)
