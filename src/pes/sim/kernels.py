@@ -138,7 +138,7 @@ def clear_cache(folders) -> None:
             module = name.removesuffix(".py")
             for pattern in (f"{module}.*.nbi", f"{module}.*.nbc"):
                 for path in Path(folder).glob(pattern):
-                    # another process may have removed it first, or it may not be ours to
+                    # another process may have removed it first
                     with contextlib.suppress(OSError):
                         path.unlink()
 
