@@ -38,16 +38,19 @@ class OneLineParser(argparse.ArgumentParser):
 # --- shared options ------------------------------------------------------------------------
 
 
+def _add_set_option(parser, help: str) -> None:
+    """``--set KEY=VALUE`` (repeatable) into ``args.overrides``; ``parser`` a parser or group."""
+    parser.add_argument(
+        "--set", metavar="KEY=VALUE", action="append", default=[], dest="overrides", help=help
+    )
+
+
 def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("scenario")
     group.add_argument("--config", metavar="F.yaml", help="EnvConfig values from a YAML file")
-    group.add_argument(
-        "--set",
-        metavar="KEY=VALUE",
-        action="append",
-        default=[],
-        dest="overrides",
-        help="override one EnvConfig key (repeatable), e.g. "
+    _add_set_option(
+        group,
+        "override one EnvConfig key (repeatable), e.g. "
         "--set num_pursuers=8 --set dynamics=point_mass",
     )
 
@@ -657,13 +660,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="F.yaml",
         help="settings from a YAML file, e.g. a run's config.yaml to train it again",
     )
-    p.add_argument(
-        "--set",
-        metavar="KEY=VALUE",
-        action="append",
-        default=[],
-        dest="overrides",
-        help="override a setting (repeatable): a run or learner key, env.KEY for the scenario, "
+    _add_set_option(
+        p,
+        "override a setting (repeatable): a run or learner key, env.KEY for the scenario, "
         "protocol.AID[.KEY] for the protocol, e.g. --set batch_size=256 "
         "--set env.num_pursuers=4 --set protocol.n_step=5 --set protocol.demonstrations=null",
     )
@@ -787,13 +786,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="outside reference runs (python -m pes.benchmarl.reference, one subfolder each) "
         "to show beside the methods in Table IV",
     )
-    p.add_argument(
-        "--set",
-        metavar="KEY=VALUE",
-        action="append",
-        default=[],
-        dest="overrides",
-        help="change a setting of every learner's training, as pes train --set (repeatable), "
+    _add_set_option(
+        p,
+        "change a setting of every learner's training, as pes train --set (repeatable), "
         "e.g. --set protocol.n_step=1 to take an aid away; the report names the changes; "
         "use a new --out for each choice",
     )
