@@ -88,7 +88,8 @@ def _by_method(specs: list[dict], done: dict, kind: str = "table4") -> dict[str,
 def _changed(meta: dict) -> str:
     """`` with --set k=v ...`` for the settings every learner's training changed, else ``""``."""
     pairs = meta.get("overrides") or {}
-    return " with " + " ".join(f"`--set {k}={v}`" for k, v in pairs.items()) if pairs else ""
+    text = [f"`--set {k}={v if isinstance(v, str) else json.dumps(v)}`" for k, v in pairs.items()]
+    return " with " + " ".join(text) if text else ""
 
 
 def _header(title: str, meta: dict) -> list[str]:
