@@ -55,14 +55,17 @@ def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``--set KEY=VALUE`` options as a mapping (the values read as YAML), in order."""
+    return dict(parse_override(text) for text in args.overrides)
+
+
 def _scenario(args: argparse.Namespace, **defaults: Any) -> EnvConfig:
     """The EnvConfig of ``--config`` and ``--set`` on top of ``defaults``."""
     values: dict[str, Any] = dict(defaults)
     if args.config:
         values.update(load_yaml(args.config))
-    for text in args.overrides:
-        key, value = parse_override(text)
-        values[key] = value
+    values.update(_overrides(args))
     return EnvConfig.from_dict(values)
 
 
@@ -358,9 +361,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         name = str(recorded.pop("name")).removesuffix("+custom")
         values["protocol"] = recorded
         protocol = protocol or name
-    for text in args.overrides:
-        key, value = parse_override(text)
-        values[key] = value
+    values.update(_overrides(args))
     cfg = build_train_config(args.algo, args.preset, values, protocol=protocol)
     out = Path(args.out or f"runs/{args.algo}")
     _say(
@@ -458,7 +459,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         report_only=args.report_only,
         protocol=args.protocol,
         outside=args.outside,
-        overrides=dict(parse_override(text) for text in args.overrides),
+        overrides=_overrides(args),
     )
     if args.json:
         _print_json(summary)

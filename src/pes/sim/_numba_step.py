@@ -401,20 +401,16 @@ def move(vehicles, actions, evader_ax, evader_ay, alive0, fx, fy, params, max_sp
             ex, ey = _ZERO, _ZERO
             if disturbed:
                 ex, ey = fx[e, a] * on / params[1, a], fy[e, a] * on / params[1, a]
-            for f in range(13):
-                buf[f * ss.BLOCK + j] = vehicles[f, e, a]
+            ss.block_in(
+                buf, j, vehicles, e, a, params[2, a], params[3, a], params[4, a], max_speed[a]
+            )
             for k in range(3):
                 buf[ss.COS_R + k * ss.BLOCK + j] = np.cos(vehicles[4 + k, e, a])
                 buf[ss.SIN_R + k * ss.BLOCK + j] = np.sin(vehicles[4 + k, e, a])
             buf[ss.ROLL_REF + j], buf[ss.PITCH_REF + j] = roll_ref, pitch_ref
             buf[ss.EX + j], buf[ss.EY + j] = ex, ey
-            buf[ss.G_ROLL + j], buf[ss.G_PITCH + j] = params[2, a], params[3, a]
-            buf[ss.G_YAW + j], buf[ss.VMAX + j] = params[4, a], max_speed[a]
         ss.block_substeps(buf, count, h, b, kp, ki, kd, n_sub)
-        for j in range(count):
-            e, a = (start + j) // num_vehicles, (start + j) % num_vehicles
-            for f in range(13):
-                out[f, e, a] = buf[f * ss.BLOCK + j]
+        ss.block_out(buf, count, start, out)
     return out
 
 

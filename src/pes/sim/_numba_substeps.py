@@ -90,6 +90,28 @@ def block_substeps(buf, count, h, b, kp, ki, kd, n):
             buf[X + j], buf[Y + j] = buf[X + j] + vx * h, buf[Y + j] + vy * h
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def block_in(buf, j, state, e, a, gyro_roll, gyro_pitch, gyro_yaw, vmax):
+    """Vehicle (e, a) of ``state`` (at least 13, E, A) into slot ``j`` of the block ``buf``:
+    its 13 state numbers, gyroscopic ratios and maximum speed (the other rows are the
+    caller's)."""
+    for f in range(13):
+        buf[f * BLOCK + j] = state[f, e, a]
+    buf[G_ROLL + j], buf[G_PITCH + j] = gyro_roll, gyro_pitch
+    buf[G_YAW + j], buf[VMAX + j] = gyro_yaw, vmax
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def block_out(buf, count, start, out):
+    """The 13 state numbers of the block's first ``count`` vehicles into ``out`` (13, E, A),
+    vehicle j of the block at flat index ``start + j`` of (E, A)."""
+    num_vehicles = out.shape[2]
+    for j in range(count):
+        e, a = (start + j) // num_vehicles, (start + j) % num_vehicles
+        for f in range(13):
+            out[f, e, a] = buf[f * BLOCK + j]
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")  # IEEE division, as torch
 def substeps(state, trig, roll_ref, pitch_ref, fx, fy, gyro, max_speed, h, b, kp, ki, kd, n):
     """``n`` sub-steps of every (environment, vehicle); arguments as
@@ -103,17 +125,11 @@ def substeps(state, trig, roll_ref, pitch_ref, fx, fy, gyro, max_speed, h, b, kp
         count = min(BLOCK, total - start)
         for j in range(count):
             e, a = (start + j) // num_vehicles, (start + j) % num_vehicles
-            for f in range(13):
-                buf[f * BLOCK + j] = state[f, e, a]
+            block_in(buf, j, state, e, a, gyro[0, a], gyro[1, a], gyro[2, a], max_speed[a])
             for k in range(6):
                 buf[COS_R + k * BLOCK + j] = trig[k, e, a]
             buf[ROLL_REF + j], buf[PITCH_REF + j] = roll_ref[e, a], pitch_ref[e, a]
             buf[EX + j], buf[EY + j] = fx[e, a], fy[e, a]
-            buf[G_ROLL + j], buf[G_PITCH + j] = gyro[0, a], gyro[1, a]
-            buf[G_YAW + j], buf[VMAX + j] = gyro[2, a], max_speed[a]
         block_substeps(buf, count, h, b, kp, ki, kd, n)
-        for j in range(count):
-            e, a = (start + j) // num_vehicles, (start + j) % num_vehicles
-            for f in range(13):
-                out[f, e, a] = buf[f * BLOCK + j]
+        block_out(buf, count, start, out)
     return out

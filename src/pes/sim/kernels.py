@@ -143,6 +143,16 @@ def clear_cache(folders) -> None:
                         path.unlink()
 
 
+def _marked() -> bool:
+    """Whether a compilation of these sources is marked ready (:func:`ready_marker`); True
+    where there is no mark to look for (then the kernels load or compile in this process, as
+    :func:`wait` does, and no cached code is cleared)."""
+    try:
+        return ready_marker().is_file()
+    except (OSError, importlib.metadata.PackageNotFoundError):
+        return True
+
+
 def _load():
     """The module of the step's kernels if they serve now, else None: loaded from the cache
     when a compilation is marked ready, otherwise a background compilation started (or
@@ -161,11 +171,7 @@ def _load():
         elif code is not None:  # it failed: Numba cannot compile them here either
             _failed = True
         return _step
-    try:
-        marked = ready_marker().is_file()
-    except (OSError, importlib.metadata.PackageNotFoundError):
-        marked = True  # no mark to look for: load (or compile) them here, as wait() does
-    if marked:
+    if _marked():
         _compile_here()
         return _step
     try:
@@ -189,10 +195,7 @@ def _compile_here() -> None:
     global _step, _failed
     if _step is not None or _failed:
         return
-    try:
-        marked = ready_marker().is_file()
-    except (OSError, importlib.metadata.PackageNotFoundError):
-        marked = True
+    marked = _marked()
     try:
         from pes.sim import _numba_step
         from pes.sim._numba_substeps import substeps
