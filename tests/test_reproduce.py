@@ -439,3 +439,8 @@ def test_set_changes_every_learner_s_training_and_a_folder_keeps_one_choice(swee
     out, _ = sweep
     with pytest.raises(pes.errors.ConfigError, match="cbc-s0 .* was made with other settings"):
         reproduce("table4", budget="tiny", seeds=1, out=out, methods=["cbc"], overrides=changes)
+    begun = tmp_path / "begun" / "trials" / "maddpg-s0"  # a trial begun with other settings
+    begun.mkdir(parents=True)
+    (begun / "spec.json").write_text(json.dumps({**specs[1], "budget": "tiny"}))
+    with pytest.raises(pes.errors.ConfigError, match="maddpg-s0 .* was made with other settings"):
+        reproduce("table4", budget="tiny", seeds=1, out=tmp_path / "begun", methods=["maddpg"])

@@ -56,13 +56,18 @@ def trials_for(
     return make_trials(methods, seeds, budget, tpnet, protocol, overrides)
 
 
-def check_finished(out: Path, specs: list[dict]) -> None:
-    """Raise :class:`ConfigError` if a finished trial in ``out`` was made with another spec
-    (another protocol or other ``--set`` keys) than the one asked for now."""
+def check_trials(out: Path, specs: list[dict]) -> None:
+    """Raise :class:`ConfigError` if a trial in ``out``, finished (``done.json``) or begun
+    (``spec.json``, written before its training), was made with another spec (another
+    protocol or other ``--set`` keys) than the one asked for now: it would be skipped or
+    resumed under the wrong settings."""
     for spec in specs:
-        done = out / "trials" / spec["id"] / "done.json"
-        if done.is_file():
-            made = json.loads(done.read_text())["spec"]
+        folder = out / "trials" / spec["id"]
+        for path in (folder / "spec.json", folder / "done.json"):
+            if not path.is_file():
+                continue
+            record = json.loads(path.read_text())
+            made = record.get("spec", record)  # done.json holds its spec, spec.json is one
             if made != spec:
                 raise ConfigError(
                     f"trial {spec['id']} in {out} was made with other settings ({made}, not "
@@ -97,7 +102,7 @@ def reproduce(
     subfolder each) that Table IV shows as extra columns.
     ``overrides``: settings changed for every learner's training (``pes train --set`` keys,
     e.g. ``{"protocol.n_step": 1}`` to take an aid away); the report names them. A folder holds
-    one such choice: finished trials made with other settings are an error.
+    one such choice: trials finished or begun with other settings are an error.
     """
     if budget not in BUDGETS:
         raise ConfigError(f"budget must be one of {', '.join(BUDGETS)}, got '{budget}'")
@@ -112,7 +117,7 @@ def reproduce(
     methods = list(methods) if methods else available_methods()
     specs = trials_for(target, methods, seeds, budget, protocol, overrides)
     out = Path(out)
-    check_finished(out, specs)
+    check_trials(out, specs)
     out.mkdir(parents=True, exist_ok=True)
     todo = [s for s in specs if not (out / "trials" / s["id"] / "done.json").is_file()]
     finished = len(specs) - len(todo)

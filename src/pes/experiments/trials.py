@@ -102,6 +102,8 @@ def run_trial(spec: dict, out: Path, threads: int = 0, progress: bool = False) -
     if done.is_file():
         return json.loads(done.read_text())
     folder.mkdir(parents=True, exist_ok=True)
+    if not (folder / "spec.json").is_file():  # what a resumed run must match (check_trials)
+        write_json(folder / "spec.json", spec)
     if threads:
         torch.set_num_threads(threads)
     budget = BUDGETS[spec["budget"]]
