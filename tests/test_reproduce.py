@@ -444,3 +444,17 @@ def test_set_changes_every_learner_s_training_and_a_folder_keeps_one_choice(swee
     (begun / "spec.json").write_text(json.dumps({**specs[1], "budget": "tiny"}))
     with pytest.raises(pes.errors.ConfigError, match="maddpg-s0 .* was made with other settings"):
         reproduce("table4", budget="tiny", seeds=1, out=tmp_path / "begun", methods=["maddpg"])
+
+
+def test_recorded_commands_name_folders_as_the_repository_has_them(tmp_path):
+    from pes.paths import recorded_command
+
+    repo = tmp_path / "clone"
+    (repo / ".git").mkdir(parents=True)
+    out = repo / "results" / "quick"
+    words = ["pes", "reproduce", "--out", str(out), f"--outside={repo / 'results' / 'b m'}"]
+    assert recorded_command(words) == "pes reproduce --out results/quick '--outside=results/b m'"
+    # Outside any git work tree, and relative paths, stay as they were given.
+    elsewhere = tmp_path / "elsewhere" / "runs"
+    assert recorded_command(["pes", "tune", "--out", str(elsewhere)]).endswith(str(elsewhere))
+    assert recorded_command(["pes", "tune", "--out", "runs/x"]) == "pes tune --out runs/x"

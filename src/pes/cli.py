@@ -19,7 +19,7 @@ from typing import Any, NoReturn
 from pes import __version__
 from pes.config import load_yaml, parse_override
 from pes.errors import CheckpointError, ConfigError, PESError, TrainingInterruptedError
-from pes.paths import prepare_output, prepare_output_dir
+from pes.paths import prepare_output, prepare_output_dir, recorded_command
 from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
 
@@ -439,8 +439,6 @@ def cmd_export_onnx(args: argparse.Namespace) -> int:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    import shlex
-
     from pes.experiments.reproduce import reproduce
 
     out = args.out or f"runs/reproduce-{args.budget}"
@@ -454,7 +452,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         use_ray=False if args.no_ray else None,
         progress=not args.json,
-        command=shlex.join(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
+        command=recorded_command(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
         parallel=args.parallel,
         report_only=args.report_only,
         protocol=args.protocol,
@@ -473,8 +471,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
-    import shlex
-
     from pes.experiments.tune import tune
 
     out = args.out or f"results/tuning/{args.algo}"
@@ -499,7 +495,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         parallel=args.parallel,
         progress=not args.json,
         # The command that runs the trials (a --report-only run names it, not itself).
-        command=shlex.join(["pes", *(a for a in sys.argv[1:] if a != "--report-only")])
+        command=recorded_command(["pes", *(a for a in sys.argv[1:] if a != "--report-only")])
         if sys.argv[1:2] == ["tune"]
         else "",
         report_only=args.report_only,

@@ -57,3 +57,29 @@ def prepare_output_dir(path: str | Path) -> Path:
         raise ConfigError(f"cannot write into {path}: it is a file, not a folder")
     _make_folder(path, path)
     return path
+
+
+def _in_repository(path: Path) -> str | None:
+    """``path`` relative to the root of the git work tree it lies in, or None."""
+    for folder in (path, *path.parents):
+        if (folder / ".git").exists():
+            return path.relative_to(folder).as_posix() or "."
+    return None
+
+
+def recorded_command(words: list[str]) -> str:
+    """The command line ``words`` as reports record it (shell-quoted): an absolute path that
+    lies in a git work tree, alone or after ``--option=``, is written relative to that tree's
+    root, so a committed record names the folder as a reader of the repository finds it
+    (``--out results/quick``, not this machine's ``/home/…/results/quick``)."""
+
+    def portable(word: str) -> str:
+        head, sep, tail = word.rpartition("=") if word.startswith("--") else ("", "", word)
+        if not tail.startswith("/"):
+            return word
+        relative = _in_repository(Path(tail))
+        return word if relative is None else head + sep + relative
+
+    import shlex
+
+    return shlex.join(portable(word) for word in words)

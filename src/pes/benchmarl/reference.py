@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -43,6 +42,7 @@ from pes.benchmarl.policy import load_benchmarl_policy
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, EVAL_SEED, eval_config, write_json
 from pes.learn.presets import QUICK_RUN
+from pes.paths import recorded_command
 
 ALGORITHMS = {"mappo": "Mappo", "ippo": "Ippo", "maddpg": "Maddpg", "masac": "Masac"}
 """``--algorithm`` name -> BenchMARL's config class prefix."""
@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checkpoint-every", type=int, default=10, help="iterations")
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
-    command = shlex.join(["python", "-m", "pes.benchmarl.reference", *(argv or sys.argv[1:])])
+    command = recorded_command(["python", "-m", "pes.benchmarl.reference", *(argv or sys.argv[1:])])
     summary = run_reference(
         args.algorithm,
         args.seed,
