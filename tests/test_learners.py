@@ -167,6 +167,7 @@ def test_train_writes_a_run_and_the_policy_evaluates(tmp_path, capsys):
     for name in ("config.yaml", "progress.csv", "checkpoint.pt", "policy.pt", "summary.json"):
         assert (tmp_path / "run" / name).is_file(), name
     assert summary["eval"]["episodes"] == 4
+    assert summary["torch_threads"] == torch.get_num_threads()  # recorded with the CPU time
     header = (tmp_path / "run" / "progress.csv").read_text().splitlines()[0]
     assert "success_rate" in header and "tp_fde" in header and "updates_per_s" in header
     # pes eval takes the run folder, the policy file or the checkpoint

@@ -306,6 +306,7 @@ def train(
             "cpu_s": round(prog.cpu_s, 1),
             "seed": cfg.seed,
             "torch": str(torch.__version__),
+            "torch_threads": torch.get_num_threads(),  # at the end of the run (or this part)
         }
 
     def save_policy(path: Path, info: dict[str, Any]) -> dict[str, Any]:
