@@ -458,3 +458,57 @@ def test_recorded_commands_name_folders_as_the_repository_has_them(tmp_path):
     elsewhere = tmp_path / "elsewhere" / "runs"
     assert recorded_command(["pes", "tune", "--out", str(elsewhere)]).endswith(str(elsewhere))
     assert recorded_command(["pes", "tune", "--out", "runs/x"]) == "pes tune --out runs/x"
+
+
+def test_table5_gives_each_seed_s_window_counts():
+    from pes.experiments.report import table5
+
+    def record(train, test):
+        errors = [0.001 * (k + 1) for k in range(5)]
+        return {
+            "table5": {
+                "pursuers": "cbc-tp",
+                "train_windows": train,
+                "test_windows": test,
+                "fde": errors,
+                "ade": errors,
+                "constant_position": {"fde": errors, "ade": errors},
+            }
+        }
+
+    specs = [{"id": f"tpnet-s{s}", "kind": "tpnet"} for s in range(2)]
+    meta = dict(
+        budget="tiny",
+        protocol="pes",
+        overrides={},
+        seeds=2,
+        eval_episodes=8,
+        evader="`flee` evader",
+        command="pes reproduce table5",
+        hardware="cpu",
+    )
+    text = table5(specs, {"tpnet-s0": record(34733, 16902), "tpnet-s1": record(35470, 15673)}, meta)
+    assert "trained on between 34,733 and 35,470 windows" in text
+    assert "measured on between 15,673 and 16,902 held-out windows" in text
+    same = table5(specs, {"tpnet-s0": record(900, 300), "tpnet-s1": record(900, 300)}, meta)
+    assert "trained on 900 windows" in same and "measured on 300 held-out windows" in same
+
+
+def test_the_recorded_commit_is_dirty_only_when_the_source_differs(tmp_path):
+    import subprocess
+
+    from pes.experiments.budgets import source_commit
+
+    package = tmp_path / "src" / "pes"
+    package.mkdir(parents=True)
+    (package / "step.py").write_text("x = 1\n")
+    (tmp_path / "README.md").write_text("results\n")
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    for args in (["init", "-q"], ["add", "."], ["commit", "-qm", "one"]):
+        subprocess.run([*git, *args], check=True)
+    head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True).stdout
+    assert source_commit(package) == head.strip()
+    (tmp_path / "README.md").write_text("a regenerated report\n")  # not the source
+    assert source_commit(package) == head.strip()
+    (package / "step.py").write_text("x = 2\n")
+    assert source_commit(package) == head.strip() + "-dirty"

@@ -73,16 +73,18 @@ DAMAGED = (1, 2)
 """Table VI: pursuers damaged at the start of the CBC-TP Net evaluations."""
 
 
-def source_commit() -> str | None:
-    """The git commit of the PES source that runs (``-dirty`` appended when tracked files
-    differ from it), or None outside a git checkout."""
-    git = ["git", "-C", str(Path(__file__).resolve().parents[3])]
+def source_commit(package: Path | None = None) -> str | None:
+    """The git commit of the PES source that runs (``-dirty`` appended when the package's
+    tracked files differ from it; results, docs and notes beside it do not count), or None
+    outside a git checkout."""
+    package = package or Path(__file__).resolve().parents[1]  # src/pes of a checkout
+    git = ["git", "-C", str(package.parents[1])]
     try:
         head = subprocess.run(
             [*git, "rev-parse", "HEAD"], capture_output=True, text=True, check=True
         ).stdout.strip()
         dirty = subprocess.run(
-            [*git, "status", "--porcelain", "--untracked-files=no"],
+            [*git, "status", "--porcelain", "--untracked-files=no", "--", str(package)],
             capture_output=True,
             text=True,
             check=True,

@@ -206,10 +206,15 @@ def table5(specs: list[dict], done: dict, meta: dict) -> str | None:
     if not recs:
         return None
     lines = _header("Table V: TP Net's prediction error", meta)
+
+    def windows(key: str) -> str:  # each seed plays its own episodes: one count, or the range
+        low, high = min(r[key] for r in recs), max(r[key] for r in recs)
+        return f"{low:,}" if low == high else f"between {low:,} and {high:,}"
+
     lines[2] = (
         f"Budget `{meta['budget']}`, {len(recs)} seed(s): TP Net (horizon 5) trained on "
-        f"{recs[0]['train_windows']} windows of {recs[0]['pursuers']} pursuers against the "
-        f"{meta['evader']}, measured on {recs[0]['test_windows']} held-out windows. "
+        f"{windows('train_windows')} windows of {recs[0]['pursuers']} pursuers against the "
+        f"{meta['evader']}, measured on {windows('test_windows')} held-out windows. "
         "Errors in arena units (metres / arena side); see pes.experiments.tpnet. "
         f"Made by `{meta['command']}` ({meta['hardware']})."
     )
