@@ -8,6 +8,7 @@ traceback from deep inside a writer.
 
 from __future__ import annotations
 
+import shlex
 import tempfile
 from pathlib import Path
 
@@ -74,12 +75,12 @@ def recorded_command(words: list[str]) -> str:
     (``--out results/quick``, not this machine's ``/home/…/results/quick``)."""
 
     def portable(word: str) -> str:
-        head, sep, tail = word.rpartition("=") if word.startswith("--") else ("", "", word)
+        head, sep, tail = word.partition("=")
+        if not (sep and word.startswith("--")):  # a word of its own, not --option=value
+            head, sep, tail = "", "", word
         if not tail.startswith("/"):
             return word
         relative = _in_repository(Path(tail))
         return word if relative is None else head + sep + relative
-
-    import shlex
 
     return shlex.join(portable(word) for word in words)
