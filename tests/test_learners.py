@@ -28,6 +28,7 @@ from pes.learn.checkpoint import save_atomic
 from pes.learn.features import frames, pursuer_obs
 from pes.learn.td import exit_charge
 from pes.learn.trainer import init_networks
+from pes.sim.bench import machine_info
 from pes.sim.layout import make_layout
 from tests.learning import FAST, assert_learns
 
@@ -168,6 +169,7 @@ def test_train_writes_a_run_and_the_policy_evaluates(tmp_path, capsys):
         assert (tmp_path / "run" / name).is_file(), name
     assert summary["eval"]["episodes"] == 4
     assert summary["torch_threads"] == torch.get_num_threads()  # recorded with the CPU time
+    assert summary["cpus"] == [machine_info()["cpu"]]  # and the CPU that spent it
     header = (tmp_path / "run" / "progress.csv").read_text().splitlines()[0]
     assert "success_rate" in header and "tp_fde" in header and "updates_per_s" in header
     # pes eval takes the run folder, the policy file or the checkpoint
@@ -610,6 +612,14 @@ def test_env_steps_stop_a_run_at_its_experience_budget_and_resume_with_it(tmp_pa
     resumed = train(longer, tmp_path / "run", resume=True, progress=False)
     assert resumed["stopped_by"] == "env_steps"
     assert 700 <= resumed["env_steps"] < 700 + step
+    assert resumed["cpus"] == summary["cpus"] == [machine_info()["cpu"]]  # one machine, once
+    # a checkpoint written before runs recorded their CPUs: the earlier part's CPU is unknown
+    ckpt = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)
+    del ckpt["progress"]["cpus"]
+    save_atomic(ckpt, tmp_path / "run" / "checkpoint.pt")
+    further = build_train_config("ppo", "tiny", dict(values, env_steps=900))
+    again = train(further, tmp_path / "run", resume=True, progress=False)
+    assert again["cpus"] == ["unrecorded CPU", machine_info()["cpu"]]
 
 
 def test_cpu_limit_stops_a_run_by_its_cpu_time_and_resumes_with_it(tmp_path):

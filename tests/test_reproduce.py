@@ -13,6 +13,7 @@ import pes
 from pes.cli import main
 from pes.experiments.reproduce import reproduce
 from pes.experiments.trials import BUDGETS, make_trials, train_config
+from pes.sim.bench import machine_info
 
 METHODS = ["pid-pf", "cbc", "cbc-tp"]
 
@@ -75,6 +76,8 @@ def test_all_targets_sequential(sweep):
     cost = next(line for line in table4.splitlines() if line.startswith("| training env steps"))
     assert cost.split(" | ")[1] == "—" and all(c.strip(" |") != "—" for c in cost.split(" | ")[2:])
     assert "| training CPU minutes (PES) |" in table4
+    # and on which CPUs those minutes were spent (the learner trials: CBC Net, CBC-TP Net)
+    assert f"trials trained on {machine_info()['cpu']} (2))" in table4
 
 
 @pytest.mark.slow
@@ -217,6 +220,7 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
         write_json(folder / "result-800.json", record)
     summary = write_tuning_report(tmp_path, specs, "", 0.0)
     assert [r["id"] for r in summary["results"]] == ["t01", "t00"]
+    assert "(trials trained on unrecorded CPU (2))" in (tmp_path / "README.md").read_text()
     assert summary["complete"] and summary["best"] == specs[1]["values"]
 
 
@@ -333,6 +337,7 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
     assert values["t00"] == {key: getattr(preset, key) for key in space}
     assert summary["best"] == summary["results"][0]["values"]
     assert "t01" in (tmp_path / "README.md").read_text()
+    assert f"trials trained on {machine_info()['cpu']} (" in (tmp_path / "README.md").read_text()
     # the tiny runs are too short to log a row: no learning curves, and none claimed
     assert "curves.png" not in (tmp_path / "README.md").read_text()
     assert not (tmp_path / "curves.png").exists()

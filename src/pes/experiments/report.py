@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections import Counter
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +92,14 @@ def _changed(meta: dict) -> str:
     pairs = meta.get("overrides") or {}
     text = [f"`--set {k}={v if isinstance(v, str) else json.dumps(v)}`" for k, v in pairs.items()]
     return " with " + " ".join(text) if text else ""
+
+
+def trained_on(trains: Iterable[dict[str, Any]]) -> str:
+    """The CPUs that training runs spent their CPU minutes on, from their summaries' ``cpus``
+    (a run resumed elsewhere names each machine): ``"A (3), unrecorded CPU (2)"``, the
+    number of runs on each, most first; ``""`` for no runs."""
+    counts = Counter(cpu for train in trains for cpu in train.get("cpus") or ["unrecorded CPU"])
+    return ", ".join(f"{cpu} ({n})" for cpu, n in counts.most_common())
 
 
 def _header(title: str, meta: dict) -> list[str]:
@@ -444,6 +454,7 @@ def write_report(
     done = _load(out, specs)
     references = load_outside(outside)
     machine = machine_info()
+    trains = [rec["train"] for rec in done.values() if rec.get("train")]  # the learner trials
     cfg = eval_config(BUDGETS[budget])
     meta = {
         "budget": budget,
@@ -457,7 +468,8 @@ def write_report(
             else f"`{cfg.evader_policy}` evader"
         ),
         "command": command or f"pes reproduce {target} --budget {budget} --seeds {seeds}",
-        "hardware": f"{machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']}",
+        "hardware": f"{machine['cpu']}, {machine['cpu_count']} cores, torch {machine['torch']}"
+        + (f"; trials trained on {cpus}" if (cpus := trained_on(trains)) else ""),
     }
     written = []
     tables = {

@@ -45,7 +45,7 @@ from pes.algos.policy import load_pursuer_policy
 from pes.errors import ConfigError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, eval_config, write_json
-from pes.experiments.report import read_progress
+from pes.experiments.report import read_progress, trained_on
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
 
 TUNE_EVAL_SEED = 3_000_000
@@ -236,7 +236,8 @@ def run_tune_trial(
         "learner": cfg.learner.__dict__,
         "train": {
             k: train_summary[k]
-            for k in ("episodes", "env_steps", "updates", "wall_s", "cpu_s", "stopped_by")
+            for k in ("episodes", "env_steps", "updates", "wall_s", "cpu_s", "cpus", "stopped_by")
+            if k in train_summary
         },
         "eval": result,
         "score": score(result),
@@ -384,6 +385,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
                 "train_episodes": record["train"]["episodes"],
                 "updates": record["train"]["updates"],
                 "cpu_s": record["train"]["cpu_s"],
+                "cpus": record["train"].get("cpus"),
                 "by_budget": {
                     str(b): {
                         "success_rate": r["eval"]["success_rate"],
@@ -456,12 +458,14 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
             f"{r['mean_crashes']:.2f} | {100 * r['lost_rate']:.1f} % | "
             f"{100 * r['timeout_rate']:.1f} % | {r['cpu_s'] / 3600:.2f} |"
         )
+    machines = f" (trials trained on {cpus})" if (cpus := trained_on(results)) else ""
     lines += [
         "",
         "Each budget's cell: success rate (mean reward per step of the paper's reward). At the "
         "trial's furthest budget: steps and crashes, mean per episode; lost, step limit: the "
         "episodes that failed because too few pursuers were left or at the step limit; CPU "
-        "hours: its training's. `trials/<id>/progress.csv` is each trial's learning curve.",
+        f"hours: its training's{machines}. `trials/<id>/progress.csv` is each trial's learning "
+        "curve.",
     ]
     if beyond:
         lines += [

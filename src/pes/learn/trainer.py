@@ -35,7 +35,7 @@ import json
 import math
 import signal
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +60,7 @@ from pes.learn.checkpoint import (
 )
 from pes.learn.config import TrainConfig
 from pes.learn.learner import Learner
+from pes.sim.bench import machine_info
 from pes.sim.env import make_env, resolve_device
 
 LOG_COLUMNS = (
@@ -124,6 +125,7 @@ class Progress:
     log_rows: int = 0  # rows of progress.csv written
     evader_speed: float = 0.0  # the speed curriculum's current cap (m/s); 0 = no curriculum
     crashes_disable: bool = False  # the crash curriculum has switched
+    cpus: list[str] = field(default_factory=list)  # CPU models the run trained on, in order
 
 
 class RunLogger:
@@ -243,6 +245,8 @@ def train(
         if "buffer" in ckpt:
             learner.buffer.load_state_dict(ckpt["buffer"])
         prog = Progress(**ckpt["progress"])
+        if "cpus" not in ckpt["progress"] and prog.env_steps:  # a checkpoint older than the record
+            prog.cpus = ["unrecorded CPU"]
         learner.updates = prog.updates
         best_state = ckpt.get("best_policy")
         # what the lost stretch after the checkpoint wrote goes: its snapshots, its best policy
@@ -307,6 +311,7 @@ def train(
             "seed": cfg.seed,
             "torch": str(torch.__version__),
             "torch_threads": torch.get_num_threads(),  # at the end of the run (or this part)
+            "cpus": list(prog.cpus),
         }
 
     def save_policy(path: Path, info: dict[str, Any]) -> dict[str, Any]:
@@ -354,6 +359,8 @@ def train(
         gen.set_state(ckpt["rng"]["sampler"])
     start = time.perf_counter()
     wall0, cpu0, cpu_start = prog.wall_s, prog.cpu_s, time.process_time()
+    if (cpu := machine_info()["cpu"]) not in prog.cpus:
+        prog.cpus.append(cpu)
     last_ckpt = start
     row_start = (start, prog.env_steps, prog.updates)
     deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
