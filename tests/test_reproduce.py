@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -132,6 +133,16 @@ def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_pa
     assert [r["seed"] for r in meta["outside"]["runs"]] == [0, 1]
     with pytest.raises(pes.errors.ConfigError, match="no folder"):
         reproduce("table4", budget="tiny", out=out, outside=tmp_path / "nope", report_only=True)
+    # the note on CBC Net (the ablation, not a column of the paper's table) only beside its column
+    assert "CBC Net (the ablation of §V-C)" in table4
+    alone = tmp_path / "alone"
+    shutil.copytree(out / "trials" / "pid-pf-s0", alone / "trials" / "pid-pf-s0")
+    reproduce(
+        "table4", budget="tiny", seeds=1, out=alone, methods=["pid-pf"], use_ray=False,
+        report_only=True,
+    )  # fmt: skip
+    assert "| PID(PF) |" in (alone / "table4.md").read_text()
+    assert "CBC Net" not in (alone / "table4.md").read_text()
 
 
 @pytest.mark.slow

@@ -191,8 +191,9 @@ def table4(
     lines += [
         "",
         "Seeds per method: " + ", ".join(f"{c} {len(e)}" for c, e in columns.items()) + ".",
-        "CBC Net (the ablation of §V-C) is not in the paper's Table IV.",
     ]
+    if "cbc" in methods:
+        lines.append("CBC Net (the ablation of §V-C) is not in the paper's Table IV.")
     if outside:
         frames = sorted({r["frames"] for runs in outside.values() for r in runs})
         episodes = sorted({r["eval"]["episodes"] for runs in outside.values() for r in runs})
