@@ -237,7 +237,6 @@ def run_tune_trial(
         "train": {
             k: train_summary[k]
             for k in ("episodes", "env_steps", "updates", "wall_s", "cpu_s", "cpus", "stopped_by")
-            if k in train_summary
         },
         "eval": result,
         "score": score(result),
