@@ -599,6 +599,25 @@ def test_an_interrupt_stops_the_run_with_its_files_written(sig, tmp_path):
     assert done.returncode == 0
 
 
+def test_a_fresh_run_into_a_used_folder_keeps_no_earlier_logs(tmp_path):
+    """A run started without --resume in a folder that holds an earlier run's logs (a trial
+    whose checkpoint was lost) writes its CSV and TensorBoard events anew, not beside them."""
+    pytest.importorskip("torch.utils.tensorboard")
+    values = {"episodes": 8, "threads": 1, "eval_episodes": 0, "tensorboard": True}
+    out = tmp_path / "run"
+    train(build_train_config("ppo", "tiny", values), out, progress=False)
+    first = sorted((out / "tb").glob("events.out.tfevents.*"))
+    assert first
+    (out / "checkpoint.pt").unlink()  # lost, as a trial's checkpoint moved to another machine
+    time.sleep(1.1)  # TensorBoard names event files by the second
+    train(build_train_config("ppo", "tiny", values), out, progress=False)
+    second = sorted((out / "tb").glob("events.out.tfevents.*"))
+    assert len(second) == 1 and second[0] not in first
+    rows = (out / "progress.csv").read_text().splitlines()
+    episodes = [int(r.split(",")[0]) for r in rows[1:]]
+    assert episodes == sorted(set(episodes))
+
+
 def test_env_steps_stop_a_run_at_its_experience_budget_and_resume_with_it(tmp_path):
     """``env_steps`` stops a run at the first step that reaches it (steps of ``num_envs``
     environments at once), on every machine alike, and a resumed run at a larger one."""

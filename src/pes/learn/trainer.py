@@ -152,8 +152,12 @@ class RunLogger:
             try:
                 from torch.utils.tensorboard import SummaryWriter  # noqa: PLC0415 - optional
 
-                # events after the checkpoint's last row are dropped
+                # events after the checkpoint's last row are dropped; a fresh run into a
+                # folder that held another's logs starts its events anew, as its CSV
                 purge = episodes + 1 if resume else None
+                if not resume:
+                    for stale in (out / "tb").glob("events.out.tfevents.*"):
+                        stale.unlink()
                 self.tb = SummaryWriter(str(out / "tb"), purge_step=purge)
             except ImportError:
                 self.tb = None
