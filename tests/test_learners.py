@@ -606,13 +606,13 @@ def test_a_fresh_run_into_a_used_folder_keeps_no_earlier_logs(tmp_path):
     values = {"episodes": 8, "threads": 1, "eval_episodes": 0, "tensorboard": True}
     out = tmp_path / "run"
     train(build_train_config("ppo", "tiny", values), out, progress=False)
-    first = sorted((out / "tb").glob("events.out.tfevents.*"))
-    assert first
+    assert list((out / "tb").glob("events.out.tfevents.*"))
     (out / "checkpoint.pt").unlink()  # lost, as a trial's checkpoint moved to another machine
-    time.sleep(1.1)  # TensorBoard names event files by the second
+    earlier = out / "tb" / "events.out.tfevents.1.earlier-run"  # a name no writer reuses
+    earlier.write_bytes(b"")
     train(build_train_config("ppo", "tiny", values), out, progress=False)
-    second = sorted((out / "tb").glob("events.out.tfevents.*"))
-    assert len(second) == 1 and second[0] not in first
+    assert not earlier.exists()
+    assert len(list((out / "tb").glob("events.out.tfevents.*"))) == 1
     rows = (out / "progress.csv").read_text().splitlines()
     episodes = [int(r.split(",")[0]) for r in rows[1:]]
     assert episodes == sorted(set(episodes))

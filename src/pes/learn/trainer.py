@@ -145,6 +145,9 @@ class RunLogger:
             writer = csv.writer(f)
             writer.writerow(columns)
             writer.writerows(kept)
+        if not resume:  # a fresh run in a used folder (its checkpoint lost): its logs anew
+            for stale in (out / "tb").glob("events.out.tfevents.*"):
+                stale.unlink()
         self.file = open(self.path, "a", newline="")  # noqa: SIM115 - closed in close()
         self.writer = csv.DictWriter(self.file, fieldnames=columns, extrasaction="ignore")
         self.tb = None
@@ -152,12 +155,8 @@ class RunLogger:
             try:
                 from torch.utils.tensorboard import SummaryWriter  # noqa: PLC0415 - optional
 
-                # events after the checkpoint's last row are dropped; a fresh run into a
-                # folder that held another's logs starts its events anew, as its CSV
+                # events after the checkpoint's last row are dropped
                 purge = episodes + 1 if resume else None
-                if not resume:
-                    for stale in (out / "tb").glob("events.out.tfevents.*"):
-                        stale.unlink()
                 self.tb = SummaryWriter(str(out / "tb"), purge_step=purge)
             except ImportError:
                 self.tb = None
