@@ -191,6 +191,7 @@ def measure(args: argparse.Namespace) -> int:
                     row[f"{name}_over_vmas"] = round(ratio, 2)
         log(json.dumps({k: v for k, v in row.items() if not k.endswith("chunks")}))
         report["sizes"].append(row)
+        save(report, args.out)
 
     if not args.skip_baselines:
         single: dict = {}
@@ -222,11 +223,16 @@ def measure(args: argparse.Namespace) -> int:
             "pes_pettingzoo_over_mpe2 (1 env)": ">= 2",
         }
 
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(report, indent=2) + "\n")
+    save(report, args.out)
     print(json.dumps(report, indent=2))
     return 0
+
+
+def save(report: dict, path: str) -> None:
+    """Write the report so far (after each batch size, so that a run cut off keeps its rows)."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -6,14 +6,15 @@
 #                                                   # OUT/gpu_log.txt; BUDGET_S: the whole
 #                                                   # script's time (default 540 s)
 #
-# 1. the CUDA tests of the simulator;
-# 2. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
-# 3. training throughput of the DDPG evader and CBC (train_cuda_others.json);
+# 1. the CUDA tests: the step on the GPU against the CPU's, from the same states;
+# 2. simulator throughput at large batches, as make_env gives it (sim_cuda.json) and fused by
+#    torch.compile (sim_cuda_compiled.json);
+# 3. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
 # 4. the shipped swarm evaluated on the GPU (eval_cuda.json; compare its model card, measured
 #    on a CPU: the same statistics, not the same episodes);
 # 5. a real quick-preset training on the GPU, stopped by its time limit and resumed
-#    (train_quick_cuda*.json, the progress log);
-# 6. simulator throughput at large batches (sim_cuda.json).
+#    (train_quick_cuda*.json; its progress log goes into gpu_log.txt);
+# 6. training throughput of the DDPG evader and CBC (train_cuda_others.json).
 # Each part has its own time limit, cut to what is left of BUDGET_S, so that a slow part costs
 # only the parts after it; every part writes its file as soon as it ends.
 OUT=${1:-benchmarks/results}
@@ -34,27 +35,30 @@ part machine
 nvidia-smi -L 2>&1 | tee -a "$LOG"
 python3 -c "import torch; print(torch.__version__, torch.cuda.get_device_name(0))" 2>&1 | tee -a "$LOG"
 part pytest-cuda
-timeout "$(lim 60)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py -k cuda 2>&1 \
-    | tail -3 | tee -a "$LOG"
+timeout "$(lim 90)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py tests/test_kernels.py \
+    -k cuda 2>&1 | tail -3 | tee -a "$LOG"
+part bench-sim
+timeout "$(lim 60)" python3 benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 1048576 \
+    --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
+part bench-sim-compiled
+timeout "$(lim 150)" python3 benchmarks/bench_sim.py --device cuda --compiled --sizes 65536 1048576 \
+    --skip-baselines --out "$OUT/sim_cuda_compiled.json" >>"$LOG" 2>&1
 part bench-cbc-tp
-timeout "$(lim 200)" python3 benchmarks/bench_train.py --device cuda --seconds 4 --algos cbc-tp \
+timeout "$(lim 120)" python3 benchmarks/bench_train.py --device cuda --seconds 4 --algos cbc-tp \
     --out "$OUT/train_cuda.json" >>"$LOG" 2>&1
-part bench-others
-timeout "$(lim 120)" python3 benchmarks/bench_train.py --device cuda --seconds 3 \
-    --algos evader-ddpg cbc --out "$OUT/train_cuda_others.json" >>"$LOG" 2>&1
 part eval-shipped
 timeout "$(lim 60)" python3 -m pes.cli eval --policy cbc-tp --device cuda --disturbance \
     --episodes 1000 --num-envs 500 --seed 0 --json >"$OUT/eval_cuda.json" 2>>"$LOG"
 part train-quick
-timeout "$(lim 110)" python3 -m pes.cli train --algo cbc-tp --set device=cuda --set time_limit=1.2 \
+timeout "$(lim 90)" python3 -m pes.cli train --algo cbc-tp --set device=cuda --set time_limit=1.0 \
     --set checkpoint_every=0.5 --set eval_episodes=200 --out "$RUN/q" --json \
     >"$OUT/train_quick_cuda.json" 2>>"$LOG"
 part train-quick-resume
-timeout "$(lim 50)" python3 -m pes.cli train --algo cbc-tp --set device=cuda --set time_limit=1.5 \
+timeout "$(lim 45)" python3 -m pes.cli train --algo cbc-tp --set device=cuda --set time_limit=1.3 \
     --set eval_episodes=100 --out "$RUN/q" --resume --json \
     >"$OUT/train_quick_cuda_resumed.json" 2>>"$LOG"
-cp "$RUN/q/progress.csv" "$OUT/train_quick_cuda_progress.csv" 2>/dev/null
-part bench-sim
-timeout "$(lim 100)" python3 benchmarks/bench_sim.py --device cuda --compiled --sizes 4096 65536 262144 \
-    --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
+cat "$RUN/q/progress.csv" >>"$LOG" 2>/dev/null  # the progress log (8 files come back at most)
+part bench-others
+timeout "$(lim 60)" python3 benchmarks/bench_train.py --device cuda --seconds 3 \
+    --algos evader-ddpg cbc --out "$OUT/train_cuda_others.json" >>"$LOG" 2>&1
 part done

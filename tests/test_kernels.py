@@ -84,33 +84,33 @@ def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
     return torch.equal(a, b)
 
 
-@pytest.mark.parametrize(
-    "config",
-    [
-        EnvConfig(max_steps=40),
-        EnvConfig(disturbance=True, evader_policy="ddpg", num_pursuers=4, damaged=1),
-        EnvConfig(
-            disturbance=True,
-            crash_mode="disable",
-            approach_weight=0.3,
-            safe_distance=1.5,
-            capture_reward=25.0,
-            crash_reward=-10.0,
-            max_steps=30,
-        ),
-        EnvConfig(intercept_lead=1.0, encirclement_weight=0.5, evader_policy="random"),
-        EnvConfig(dynamics="point_mass", num_pursuers=3, capture_count=2),
-        EnvConfig(distance_metric="geodesic"),  # torch around the sub-step kernel alone
-    ],
-    ids=[
-        "flee-resets",
-        "disturbance-ddpg-damaged",
-        "pes-reward-disable",
-        "lead-encircle",
-        "point",
-        "geodesic",
-    ],
-)
+STEP_CONFIGS = [
+    EnvConfig(max_steps=40),
+    EnvConfig(disturbance=True, evader_policy="ddpg", num_pursuers=4, damaged=1),
+    EnvConfig(
+        disturbance=True,
+        crash_mode="disable",
+        approach_weight=0.3,
+        safe_distance=1.5,
+        capture_reward=25.0,
+        crash_reward=-10.0,
+        max_steps=30,
+    ),
+    EnvConfig(intercept_lead=1.0, encirclement_weight=0.5, evader_policy="random"),
+    EnvConfig(dynamics="point_mass", num_pursuers=3, capture_count=2),
+    EnvConfig(distance_metric="geodesic"),  # torch around the sub-step kernel alone
+]
+STEP_IDS = [
+    "flee-resets",
+    "disturbance-ddpg-damaged",
+    "pes-reward-disable",
+    "lead-encircle",
+    "point",
+    "geodesic",
+]
+
+
+@pytest.mark.parametrize("config", STEP_CONFIGS, ids=STEP_IDS)
 def test_kernels_step_as_torch(config, torch_loop):
     """From the same states and actions the two paths give the same flags, counters and
     resets, and the same numbers to float32 rounding (torch's vectorised square root is not
@@ -134,6 +134,32 @@ def test_kernels_step_as_torch(config, torch_loop):
         for key, value in env.get_state().items():
             assert _same(kernel_state[key], value), key
         env.set_state(kernel_state)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+@pytest.mark.parametrize("config", STEP_CONFIGS, ids=STEP_IDS)
+def test_cuda_steps_as_the_cpu(config, torch_loop):
+    """The CUDA step against the CPU's torch code (which the test above ties to the kernels):
+    from the same states and actions, the same flags, counters and resets, and the same
+    numbers to float32 rounding."""
+    torch_loop(False)
+    cpu = pes.make_env(config, num_envs=37, seed=5)
+    gpu = pes.make_env(config, num_envs=37, seed=5, device="cuda")
+    cpu.reset(seed=5)
+    gpu.reset(seed=5)
+    generator = torch.Generator().manual_seed(0)
+    for _ in range(70):
+        actions = torch.rand(37, config.num_pursuers, 2, generator=generator) * 2 - 1
+        gpu.set_state(cpu.get_state())
+        by_cpu = cpu.step(actions)
+        by_gpu = [x.cpu() if isinstance(x, torch.Tensor) else x for x in gpu.step(actions.cuda())]
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated"), by_cpu, by_gpu):
+            assert _same(a, b), name
+        for key, value in by_cpu[4].items():
+            assert _same(value, by_gpu[4][key].cpu()), key
+        gpu_state = gpu.get_state()
+        for key, value in cpu.get_state().items():
+            assert _same(value, gpu_state[key].cpu()), key
 
 
 def test_torch_loop_still_serves_float64_and_gradients(torch_loop):
