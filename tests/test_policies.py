@@ -125,3 +125,17 @@ def test_a_row_wise_policy_acts_only_for_the_environments_still_playing():
         results[row_wise] = evaluate(policy, cfg, episodes=13, num_envs=4, seed=3)
         assert (min(policy.batches) < 4) == row_wise
     assert results[True].per_episode == results[False].per_episode
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_pid_pf_restored_on_the_cpu_goes_on_on_the_gpu():
+    """A checkpoint loads to the CPU: the controller's memory follows the observations to the
+    GPU (a demonstrator resumed in a training on CUDA) and it acts as the one it was saved from."""
+    env = pes.make_env(num_envs=8, seed=0, device="cuda")
+    obs, info = env.reset(seed=0)
+    saved = PIDPotentialField()
+    for _ in range(5):
+        obs, _, _, _, info = env.step(saved(obs, info))
+    restored = PIDPotentialField()
+    restored.load_state_dict({k: v.cpu() for k, v in saved.state_dict().items()})
+    assert torch.allclose(restored(obs, info), saved(obs, info))

@@ -88,6 +88,9 @@ class PIDPotentialField:
         cfg, g = self.env_config, self.gains
         if self.boxes.device != obs.device:
             self.boxes, self.arena = self.boxes.to(obs.device), self.arena.to(obs.device)
+        if self.integral is not None and self.integral.device != obs.device:
+            for name in self.MEMORY:  # restored from a checkpoint, which loads to the CPU
+                setattr(self, name, getattr(self, name).to(obs.device))
         scale = self.arena
         own = obs[:, :, 0]  # (E, N, 8) row 0: the pursuer itself
         pos = own[..., 0:2] * scale

@@ -129,6 +129,10 @@ class Scenario:
     evader_cells: Tensor  # (Me, 2) centres of free start cells for the evader, m
     other_index: Tensor  # (N, N) row k of pursuer i's observation shows pursuer other_index[i, k]
     vel_scale: float  # pursuer max speed, m/s: velocity normaliser of observations
+    # (N + 1,) int64 0..N, the vehicles' numbers that index their random draws. A tensor read
+    # from memory, not torch.arange in the step: Inductor folds an arange into a CUDA kernel's
+    # int32 index arithmetic, where Triton refuses the hash's constants above 2**31.
+    vehicle: Tensor
     evader_policy: EvaderPolicy | None = field(default=None)
     roadmap: Roadmap | None = field(default=None)  # distance_metric="geodesic" only
     kernel_constants: dict | None = field(default=None, repr=False)  # pes.sim.kernels' copies
@@ -208,6 +212,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
         evader_cells=torch.tensor(evader_cells, dtype=torch.float32, device=device),
         other_index=others,
         vel_scale=config.pursuer_max_speed,
+        vehicle=torch.arange(config.num_vehicles, device=device),
     )
     if config.distance_metric == "geodesic":
         scenario.roadmap = build_roadmap(boxes, arena, config.body_radius + ROADMAP_CLEARANCE)
@@ -356,7 +361,7 @@ def spawn(sc: Scenario, key: Tensor, episode: Tensor) -> dict[str, Tensor]:
     cfg = sc.config
     n = cfg.num_pursuers
     device = key.device
-    vehicle = torch.arange(n + 1, device=device)
+    vehicle = sc.vehicle
 
     episode_key = rng.derive(key, episode)
 
@@ -405,7 +410,7 @@ def spawn(sc: Scenario, key: Tensor, episode: Tensor) -> dict[str, Tensor]:
 def _disturbance(sc: Scenario, c: Counters) -> tuple[Tensor, Tensor]:
     """Horizontal disturbance forces (E, A) x and y in newtons for this step (§V-B4)."""
     cfg = sc.config
-    vehicle = torch.arange(cfg.num_vehicles, device=c.key.device)
+    vehicle = sc.vehicle
     key = rng.derive(c.episode_key, c.step)[:, None]  # (E, 1)
     on = rng.uniform(key, (vehicle * 2) * 8 + STREAM_DISTURBANCE) < cfg.disturbance_prob
     angle = rng.uniform(key, (vehicle * 2 + 1) * 8 + STREAM_DISTURBANCE) * (2 * math.pi)
