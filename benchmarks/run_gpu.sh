@@ -6,7 +6,8 @@
 #                                                   # OUT/gpu_log.txt; BUDGET_S: the whole
 #                                                   # script's time (default 540 s)
 #
-# 1. the CUDA tests: the step on the GPU against the CPU's, from the same states;
+# 1. the CUDA tests: the step on the GPU against the CPU's from the same states, a PID(PF)
+#    restored from a checkpoint;
 # 2. simulator throughput at large batches, as make_env gives it (sim_cuda.json) and fused by
 #    torch.compile (sim_cuda_compiled.json);
 # 3. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
@@ -36,7 +37,7 @@ nvidia-smi -L 2>&1 | tee -a "$LOG"
 python3 -c "import torch; print(torch.__version__, torch.cuda.get_device_name(0))" 2>&1 | tee -a "$LOG"
 part pytest-cuda
 timeout "$(lim 90)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py tests/test_kernels.py \
-    -k cuda 2>&1 | tail -3 | tee -a "$LOG"
+    tests/test_policies.py -k "cuda or gpu" 2>&1 | tail -3 | tee -a "$LOG"
 part bench-sim
 timeout "$(lim 60)" python3 benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 1048576 \
     --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
