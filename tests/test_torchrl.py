@@ -348,3 +348,30 @@ def test_benchmarl_reference_run_stops_at_its_frame_budget_and_is_evaluated(tmp_
     longer = dict(kwargs, frames=240)
     resumed = run_reference("mappo", 0, tmp_path, experiment_overrides=small, **longer)
     assert resumed["frames"] == 240 and resumed["cpu_s"] > result["cpu_s"]
+
+
+def test_a_diverged_reference_run_is_evaluated_at_its_last_checkpoint(tmp_path, monkeypatch):
+    """When the policy's actions go NaN (the simulator raises ActionError) the run stops, its
+    last checkpoint is evaluated and result.json records the divergence."""
+    pytest.importorskip("benchmarl")
+    from pes.benchmarl import reference
+
+    trains = reference.Experiment.run
+
+    def run(self):  # trains as asked, then the next batch's actions are NaN
+        trains(self)
+        raise pes.errors.ActionError("actions hold NaN or infinite values")
+
+    monkeypatch.setattr(reference.Experiment, "run", run)
+    small = {
+        "on_policy_collected_frames_per_batch": 60,
+        "on_policy_n_envs_per_worker": 2,
+        "on_policy_n_minibatch_iters": 1,
+        "on_policy_minibatch_size": 20,
+    }
+    result = reference.run_reference(
+        "ippo", 0, tmp_path, frames=120, eval_episodes=2, checkpoint_every=1,
+        experiment_overrides=small,
+    )  # fmt: skip
+    assert result["diverged"] == "actions hold NaN or infinite values after 120 frames"
+    assert result["frames"] == 120 and result["eval"]["episodes"] == 2

@@ -14,7 +14,10 @@ any machine and beside any job. A checkpoint is written every ``--checkpoint-eve
 iterations, so running the same command again resumes from the last checkpoint (the
 iterations after it are done again). Writes ``OUT/<experiment>/`` (BenchMARL's folder: CSV logs,
 checkpoints, ``config.pkl``), ``OUT/cpu.json`` (the CPU time spent, for the record) and
-``OUT/result.json`` (the command, the counters, the evaluation).
+``OUT/result.json`` (the command, the counters, the evaluation). A run whose policy puts out
+NaN or infinite actions (its training diverged) stops there: its last checkpoint, written
+before, is evaluated, and ``result.json`` says so (``diverged``; ``frames`` is the
+checkpoint's).
 
 What BenchMARL gets and PES's learners get alike: the scenario, the training reward, the
 disturbance, the env steps and the evaluation. What it does not get: the ``pes`` protocol's
@@ -39,6 +42,7 @@ from benchmarl.models import MlpConfig
 
 from pes.benchmarl import PESTask
 from pes.benchmarl.policy import load_benchmarl_policy
+from pes.errors import ActionError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, EVAL_SEED, eval_config, write_json
 from pes.learn.presets import QUICK_RUN
@@ -118,8 +122,9 @@ def run_reference(
     config.keep_checkpoints_num = 2
     config.restore_file = str(resume) if resume is not None else None
     reached = int(resume.stem.split("_")[-1]) if resume is not None else 0
+    diverged = None
     if reached < frames:
-        Experiment(
+        experiment = Experiment(
             task=PESTask.TRAIN.get_task(),
             algorithm_config=getattr(algorithms, f"{ALGORITHMS[algorithm]}Config").get_from_yaml(),
             model_config=MlpConfig.get_from_yaml(),
@@ -127,7 +132,11 @@ def run_reference(
             seed=seed,
             config=config,
             callbacks=[CpuClock(spent, record)],
-        ).run()
+        )
+        try:
+            experiment.run()
+        except ActionError as exc:  # the simulator refused the policy's actions
+            diverged = f"{exc} after {experiment.total_frames:,} frames"
     checkpoint = _latest_checkpoint(out)
     env_cfg = eval_config(BUDGETS["quick"])
     policy = load_benchmarl_policy(checkpoint, env_cfg)
@@ -151,6 +160,8 @@ def run_reference(
         "cpu_s": clock.get("cpu_s"),
         "eval": result.summary(),
     }
+    if diverged is not None:
+        summary["diverged"] = diverged
     write_json(done, summary)
     return summary
 

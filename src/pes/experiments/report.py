@@ -208,6 +208,13 @@ def table4(
             + "; ".join(f"`{r['command']}`" for runs in outside.values() for r in runs)
             + "."
         )
+        for label, runs in outside.items():
+            for r in runs:
+                if "diverged" in r:
+                    lines.append(
+                        f"{label}, seed {r['seed']}: training diverged ({r['diverged']}); "
+                        f"its last checkpoint before that, at {r['frames']:,} frames, is evaluated."
+                    )
     lines.append("")
     return "\n".join(lines)
 
