@@ -37,6 +37,7 @@ from pathlib import Path
 import torch
 
 import pes
+from pes.experiments.budgets import write_json
 from pes.sim.bench import Timer, machine_info, pes_timer
 
 ROUNDS = 5
@@ -232,7 +233,7 @@ def save(report: dict, path: str) -> None:
     """Write the report so far (after each batch size, so that a run cut off keeps its rows)."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(report, indent=2) + "\n")
+    write_json(out, report)  # atomically: a run stopped while writing keeps the rows before
 
 
 if __name__ == "__main__":

@@ -78,10 +78,22 @@ def test_a_machine_without_compiled_kernels_steps_at_once_and_compiles_them_asid
 
 
 def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
-    """Equal for flags and counters, equal to float32 rounding for numbers."""
+    """Equal for flags and counters, equal to float32 rounding for numbers (on the CPU)."""
+    a, b = a.cpu(), b.cpu()
     if a.is_floating_point():
         return torch.allclose(a, b, rtol=1e-5, atol=1e-5)
     return torch.equal(a, b)
+
+
+def _assert_same_step(step_a: tuple, state_a: dict, step_b: tuple, state_b: dict) -> None:
+    """Two steps from the same state and actions: the same outputs (obs, reward, terminated,
+    truncated, info) and the same next state, by :func:`_same`."""
+    for name, a, b in zip(("obs", "reward", "terminated", "truncated"), step_a, step_b):
+        assert _same(a, b), name
+    for key, value in step_b[4].items():
+        assert _same(step_a[4][key], value), key
+    for key, value in state_b.items():
+        assert _same(state_a[key], value), key
 
 
 STEP_CONFIGS = [
@@ -127,12 +139,7 @@ def test_kernels_step_as_torch(config, torch_loop):
         env.set_state(start)
         torch_loop(False)
         by_torch = env.step(actions)
-        for name, a, b in zip(("obs", "reward", "terminated", "truncated"), by_kernel, by_torch):
-            assert _same(a, b), name
-        for key, value in by_torch[4].items():
-            assert _same(by_kernel[4][key], value), key
-        for key, value in env.get_state().items():
-            assert _same(kernel_state[key], value), key
+        _assert_same_step(by_kernel, kernel_state, by_torch, env.get_state())
         env.set_state(kernel_state)
 
 
@@ -152,14 +159,8 @@ def test_cuda_steps_as_the_cpu(config, torch_loop):
         actions = torch.rand(37, config.num_pursuers, 2, generator=generator) * 2 - 1
         gpu.set_state(cpu.get_state())
         by_cpu = cpu.step(actions)
-        by_gpu = [x.cpu() if isinstance(x, torch.Tensor) else x for x in gpu.step(actions.cuda())]
-        for name, a, b in zip(("obs", "reward", "terminated", "truncated"), by_cpu, by_gpu):
-            assert _same(a, b), name
-        for key, value in by_cpu[4].items():
-            assert _same(value, by_gpu[4][key].cpu()), key
-        gpu_state = gpu.get_state()
-        for key, value in cpu.get_state().items():
-            assert _same(value, gpu_state[key].cpu()), key
+        by_gpu = gpu.step(actions.cuda())
+        _assert_same_step(by_cpu, cpu.get_state(), by_gpu, gpu.get_state())
 
 
 def test_torch_loop_still_serves_float64_and_gradients(torch_loop):
