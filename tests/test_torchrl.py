@@ -375,3 +375,23 @@ def test_a_diverged_reference_run_is_evaluated_at_its_last_checkpoint(tmp_path, 
     )  # fmt: skip
     assert result["diverged"] == "actions hold NaN or infinite values after 120 frames"
     assert result["frames"] == 120 and result["eval"]["episodes"] == 2
+
+
+def test_a_reference_run_diverging_before_its_first_checkpoint_fails_in_one_line(
+    tmp_path, monkeypatch, capsys
+):
+    """Nothing to evaluate: the command says so in one line, exits non-zero and writes no
+    result.json (which would otherwise stand in Table IV's report)."""
+    pytest.importorskip("benchmarl")
+    from pes.benchmarl import reference
+
+    def run(self):  # the first batch's actions are already NaN
+        raise pes.errors.ActionError("actions hold NaN or infinite values")
+
+    monkeypatch.setattr(reference.Experiment, "run", run)
+    out = tmp_path / "run"
+    assert reference.main(["--algorithm", "ippo", "--seed", "0", "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ippo seed 0: training diverged (actions hold NaN")
+    assert "before its first checkpoint" in err and "\n" not in err
+    assert not (out / "result.json").exists()

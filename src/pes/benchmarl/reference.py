@@ -17,7 +17,8 @@ checkpoints, ``config.pkl``), ``OUT/cpu.json`` (the CPU time spent, for the reco
 ``OUT/result.json`` (the command, the counters, the evaluation). A run whose policy puts out
 NaN or infinite actions (its training diverged) stops there: its last checkpoint, written
 before, is evaluated, and ``result.json`` says so (``diverged``; ``frames`` is the
-checkpoint's).
+checkpoint's); one that diverges before its first checkpoint ends with a one-line error and
+no ``result.json``.
 
 What BenchMARL gets and PES's learners get alike: the scenario, the training reward, the
 disturbance, the env steps and the evaluation. What it does not get: the ``pes`` protocol's
@@ -42,7 +43,7 @@ from benchmarl.models import MlpConfig
 
 from pes.benchmarl import PESTask
 from pes.benchmarl.policy import load_benchmarl_policy
-from pes.errors import ActionError
+from pes.errors import ActionError, CheckpointError, PESError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, EVAL_SEED, eval_config, write_json
 from pes.learn.presets import QUICK_RUN
@@ -138,6 +139,11 @@ def run_reference(
         except ActionError as exc:  # the simulator refused the policy's actions
             diverged = f"{exc} after {experiment.total_frames:,} frames"
     checkpoint = _latest_checkpoint(out)
+    if checkpoint is None:  # only a divergence stops training before checkpoint_at_end
+        raise CheckpointError(
+            f"{algorithm} seed {seed}: training diverged ({diverged}) before its first "
+            f"checkpoint in {out}; nothing to evaluate"
+        )
     env_cfg = eval_config(BUDGETS["quick"])
     policy = load_benchmarl_policy(checkpoint, env_cfg)
     result = evaluate(
@@ -180,15 +186,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     command = recorded_command(["python", "-m", "pes.benchmarl.reference", *(argv or sys.argv[1:])])
-    summary = run_reference(
-        args.algorithm,
-        args.seed,
-        args.out,
-        frames=args.frames,
-        eval_episodes=args.eval_episodes,
-        checkpoint_every=args.checkpoint_every,
-        command=command,
-    )
+    try:
+        summary = run_reference(
+            args.algorithm,
+            args.seed,
+            args.out,
+            frames=args.frames,
+            eval_episodes=args.eval_episodes,
+            checkpoint_every=args.checkpoint_every,
+            command=command,
+        )
+    except PESError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     print(json.dumps(summary, indent=2))
     return 0
 
