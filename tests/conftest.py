@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import importlib
+import os
+from types import ModuleType
+
 import pytest
 import torch
 
@@ -25,6 +29,15 @@ def _one_thread():
     (hundreds of times a one-thread one)."""
     torch.set_num_threads(1)
     yield
+
+
+def optional(module: str) -> ModuleType:
+    """``pytest.importorskip(module)`` for a package of an optional extra, except under
+    ``PES_REQUIRE_EXTRAS=1`` (as in CI, which installs every extra the tests use), where a
+    missing or broken install fails instead of skipping."""
+    if os.environ.get("PES_REQUIRE_EXTRAS") == "1":
+        return importlib.import_module(module)
+    return pytest.importorskip(module)
 
 
 @pytest.fixture

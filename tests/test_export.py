@@ -20,8 +20,9 @@ from pes.cli import main
 from pes.config import to_dict
 from pes.learn.checkpoint import POLICY_FORMAT, VERSION, save_atomic
 from pes.learn.features import other_index
+from tests.conftest import optional
 
-pytest.importorskip("onnxruntime")
+optional("onnxruntime")
 from pes.algos.cbc_tp_onnx import export_onnx, onnx_session, other_rows  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -30,6 +30,7 @@ from pes.learn.td import exit_charge
 from pes.learn.trainer import init_networks
 from pes.sim.bench import machine_info
 from pes.sim.layout import make_layout
+from tests.conftest import optional
 from tests.learning import FAST, assert_learns
 
 
@@ -602,7 +603,7 @@ def test_an_interrupt_stops_the_run_with_its_files_written(sig, tmp_path):
 def test_a_fresh_run_into_a_used_folder_keeps_no_earlier_logs(tmp_path):
     """A run started without --resume in a folder that holds an earlier run's logs (a trial
     whose checkpoint was lost) writes its CSV and TensorBoard events anew, not beside them."""
-    pytest.importorskip("torch.utils.tensorboard")
+    optional("torch.utils.tensorboard")
     values = {"episodes": 8, "threads": 1, "eval_episodes": 0, "tensorboard": True}
     out = tmp_path / "run"
     train(build_train_config("ppo", "tiny", values), out, progress=False)

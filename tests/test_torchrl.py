@@ -1,15 +1,20 @@
 """The TorchRL interface (pes.torchrl) and the BenchMARL task family (pes.benchmarl).
 
-Skipped unless the extras are installed: ``pip install -e ".[test,torchrl]"`` for the TorchRL
-tests, ``pip install -e ".[test,benchmarl]"`` for all of them.
+Skipped unless the extras are installed (failing instead under ``PES_REQUIRE_EXTRAS=1``, as in
+CI): ``pip install -e ".[test,torchrl]"`` for the TorchRL tests, ``pip install -e
+".[test,benchmarl]"`` for all of them.
 """
 
 from __future__ import annotations
 
+import os
+
 import pytest
 import torch
 
-pytest.importorskip("torchrl")
+from tests.conftest import optional
+
+optional("torchrl")
 
 from tensordict import TensorDict  # noqa: E402
 from torchrl.envs.utils import check_env_specs  # noqa: E402
@@ -147,6 +152,22 @@ def test_options_pass_through():
         PESTorchRLEnv({"evader_policy": "external"})
 
 
+@pytest.mark.slow
+def test_the_compiled_step_through_torchrl():
+    """``sim_compile=True``: TorchRL's rollout steps the fused simulator (no fall-back to eager)
+    and sees the eager one's episodes, resets included."""
+    fused = PESTorchRLEnv(SHORT, num_envs=4, seed=3, sim_compile=True)
+    eager = PESTorchRLEnv(SHORT, num_envs=4, seed=3)
+    a = fused.rollout(30, fixed_policy(1), break_when_any_done=False)
+    b = eager.rollout(30, fixed_policy(1), break_when_any_done=False)
+    assert fused.sim.compiled
+    for key in (("next", GROUP, "observation"), ("next", GROUP, "reward"), ("next", "state")):
+        torch.testing.assert_close(a[key], b[key], atol=1e-4, rtol=0)
+    for key in ("terminated", "truncated", "done"):
+        assert torch.equal(a["next", key], b["next", key])
+    assert a["next", "done"].any()  # episodes of 12 steps: the reset pass ran too
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA GPU")
 def test_cuda():
     env = PESTorchRLEnv(num_envs=8, device="cuda", seed=0)
@@ -170,7 +191,7 @@ BENCHMARL_TASK = {"max_steps": 20, "num_pursuers": 3, "capture_count": 2}
 
 def tiny_experiment(tmp_path, task_name: str, algorithm: str, task_config=None):
     """A BenchMARL experiment shrunk to seconds: two iterations of 60 frames, 2 envs."""
-    pytest.importorskip("benchmarl")
+    optional("benchmarl")
     from benchmarl import algorithms
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models import MlpConfig
@@ -237,8 +258,34 @@ def test_benchmarl_tasks_run(tmp_path, task_name):
     assert experiment.n_iters_performed == 2
 
 
+def test_the_benchmarl_command_line_runs_an_experiment_on_pes(tmp_path):
+    """``python -m pes.benchmarl``, BenchMARL's own command line, trains on a PES task."""
+    optional("benchmarl")
+    import subprocess
+    import sys
+
+    tiny = [
+        "experiment.max_n_iters=1", "experiment.max_n_frames=null",
+        "experiment.on_policy_collected_frames_per_batch=60",
+        "experiment.on_policy_n_envs_per_worker=2", "experiment.on_policy_n_minibatch_iters=1",
+        "experiment.on_policy_minibatch_size=20", "experiment.evaluation=false",
+        "experiment.loggers=[csv]", "experiment.checkpoint_at_end=false",
+        f"experiment.save_folder={tmp_path}", f"hydra.run.dir={tmp_path / 'hydra'}",
+    ]  # fmt: skip
+    task = ["task.num_pursuers=3", "task.capture_count=2", "task.max_steps=20"]
+    command = [sys.executable, "-m", "pes.benchmarl", "algorithm=mappo", "task=pes/damaged"]
+    run = subprocess.run(
+        [*command, *task, *tiny], capture_output=True, text=True, timeout=300,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "Algorithm: mappo, Task: pes/damaged" in run.stdout
+    (frames,) = tmp_path.glob("*/*/scalars/counters_total_frames.csv")  # BenchMARL's layout
+    assert frames.read_text().strip().splitlines()[-1].endswith(",60.0")
+
+
 def test_benchmarl_task_specs_and_errors():
-    pytest.importorskip("benchmarl")
+    optional("benchmarl")
     from benchmarl.environments import task_config_registry
 
     from pes.benchmarl import PESTask
@@ -261,7 +308,7 @@ def test_benchmarl_task_specs_and_errors():
 def test_benchmarl_hydra_config_and_log_info():
     """``task=pes/<task>`` resolves in BenchMARL's own config tree (what ``python -m
     pes.benchmarl`` runs), EnvConfig keys are task overrides, and the success rate is logged."""
-    pytest.importorskip("benchmarl")
+    optional("benchmarl")
     from benchmarl.hydra_config import load_task_config_from_hydra
     from hydra import compose, initialize_config_module
 
@@ -307,6 +354,13 @@ def test_pes_eval_measures_a_benchmarl_checkpoint(tmp_path, algorithm, capsys):
     actions = policy(obs, info)
     assert actions.shape == (4, 3, 2) and actions.abs().max() <= 1.0
     assert torch.equal(actions, policy(obs, info))  # no exploration noise
+    if torch.cuda.is_available():  # pes eval --device cuda: the networks and the env on the GPU
+        on_gpu = make_policy(str(checkpoint), config, device="cuda")
+        gpu_env = pes.make_env(config, num_envs=4, seed=0, device="cuda")
+        gpu_obs, gpu_info = gpu_env.reset(seed=0)
+        gpu_actions = on_gpu(gpu_obs, gpu_info)
+        assert gpu_actions.is_cuda
+        torch.testing.assert_close(gpu_actions.cpu(), actions, atol=1e-4, rtol=0)
     with pytest.raises(pes.errors.ConfigError, match="trained with 3 pursuers"):
         make_policy(str(checkpoint), pes.EnvConfig())
 
@@ -328,7 +382,7 @@ def test_benchmarl_reference_run_stops_at_its_frame_budget_and_is_evaluated(tmp_
     """A reference run on pes/train: BenchMARL's configs, stopped by its budget of frames (env
     steps) with a checkpoint, that checkpoint evaluated with PES's protocol; a second call
     reads the result; a larger budget resumes from the checkpoint."""
-    pytest.importorskip("benchmarl")
+    optional("benchmarl")
     from pes.benchmarl.reference import quick_frames, run_reference
 
     assert quick_frames() == 1_000_000
@@ -353,7 +407,7 @@ def test_benchmarl_reference_run_stops_at_its_frame_budget_and_is_evaluated(tmp_
 def test_a_diverged_reference_run_is_evaluated_at_its_last_checkpoint(tmp_path, monkeypatch):
     """When the policy's actions go NaN (the simulator raises ActionError) the run stops, its
     last checkpoint is evaluated and result.json records the divergence."""
-    pytest.importorskip("benchmarl")
+    optional("benchmarl")
     from pes.benchmarl import reference
 
     trains = reference.Experiment.run
@@ -382,7 +436,7 @@ def test_a_reference_run_diverging_before_its_first_checkpoint_fails_in_one_line
 ):
     """Nothing to evaluate: the command says so in one line, exits non-zero and writes no
     result.json (which would otherwise stand in Table IV's report)."""
-    pytest.importorskip("benchmarl")
+    optional("benchmarl")
     from pes.benchmarl import reference
 
     def run(self):  # the first batch's actions are already NaN

@@ -22,6 +22,7 @@ from pes.errors import ActionError, CheckpointError, ConfigError
 from pes.paths import prepare_output, prepare_output_dir
 from pes.record import check_record, load_record
 from pes.sim.layout import Layout
+from tests.conftest import optional
 
 
 def one_line_error(capsys) -> str:
@@ -389,8 +390,8 @@ def test_prepare_output_creates_the_folder(tmp_path):
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf])
 def test_export_onnx_rejects_non_finite_weights(tmp_path, capsys, bad):
-    pytest.importorskip("onnx")
-    pytest.importorskip("onnxscript")
+    optional("onnx")
+    optional("onnxscript")
     from pes.models import is_shipped
 
     if not is_shipped("cbc-tp"):

@@ -121,7 +121,7 @@ def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"
     if _is_benchmarl_checkpoint(name):
         from pes.benchmarl.policy import load_benchmarl_policy
 
-        return load_benchmarl_policy(name, config)
+        return load_benchmarl_policy(name, config, device)
     if is_policy_spec(name):
         return load_pursuer_policy(name, config, device)[0]
     known = ", ".join([*SCRIPTED, "cbc-tp"])
@@ -560,7 +560,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--policy",
         required=True,
-        help="pid-pf, random, cbc-tp (the shipped swarm), or a policy.pt / checkpoint / run folder",
+        help="pid-pf, random, cbc-tp (the shipped swarm), a policy.pt / checkpoint / run folder, "
+        "or a BenchMARL checkpoint",
     )
     p.add_argument("--episodes", type=_positive, default=100, help="episodes (default: 100)")
     _add_test_options(p)

@@ -364,9 +364,10 @@ class TorchRLPolicy:
     "observation")`` (E, N, 9N) -- as :class:`PESTorchRLEnv` gives it -- and writes
     ``("pursuers", "action")`` (E, N, 2). It runs in TorchRL's deterministic exploration mode
     (the mean or mode of a stochastic policy, no exploration noise); actions are clipped to
-    [-1, 1]. Recurrent policies, whose hidden state the tensordict would carry between steps,
-    are not supported: a module that reads keys other than the observation and the alive mask
-    is a one-line error.
+    [-1, 1]. The module runs on the device of its parameters (the CPU if it has none); the
+    observations go there and the actions come back to theirs. Recurrent policies, whose
+    hidden state the tensordict would carry between steps, are not supported: a module that
+    reads keys other than the observation and the alive mask is a one-line error.
     """
 
     row_wise = True  # see pes.policies.Policy
@@ -383,6 +384,8 @@ class TorchRLPolicy:
                 f"({GROUP!r}, 'observation') can be evaluated"
             )
         self.module = module
+        params = next(iter(module.parameters()), None) if hasattr(module, "parameters") else None
+        self.device = params.device if params is not None else torch.device("cpu")
 
     def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
         from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -400,8 +403,8 @@ class TorchRLPolicy:
             {GROUP: group, "state": info["state"].flatten(1)}, batch_size=alive.shape[:1]
         )
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-            out = self.module(td)
-        return out.get((GROUP, "action")).clamp(-1.0, 1.0)
+            out = self.module(td.to(self.device))
+        return out.get((GROUP, "action")).to(obs.device).clamp(-1.0, 1.0)
 
     def reset(self, mask: Tensor | None = None) -> None:
         """Stateless between steps."""

@@ -2,8 +2,8 @@
 
 BenchMARL's own command line (``benchmarl/run.py``: its config tree, its algorithm, model and
 experiment configs) with the PES tasks registered, so ``task=pes/default``, ``pes/damaged``,
-``pes/point_mass`` and ``pes/easy`` work next to BenchMARL's tasks, and every EnvConfig key is
-a task override: ``task.num_pursuers=3``, ``task.disturbance=true``.
+``pes/point_mass``, ``pes/easy`` and ``pes/train`` work next to BenchMARL's tasks, and every
+EnvConfig key is a task override: ``task.num_pursuers=3``, ``task.disturbance=true``.
 """
 
 from __future__ import annotations

@@ -23,13 +23,22 @@ from pes.sim.config import EnvConfig
 from pes.torchrl import GROUP, TorchRLPolicy
 
 
-def load_benchmarl_policy(path: str | Path, config: EnvConfig) -> TorchRLPolicy:
+def load_benchmarl_policy(
+    path: str | Path, config: EnvConfig, device: str = "cpu"
+) -> TorchRLPolicy:
     """The deterministic policy of the BenchMARL checkpoint ``path``, checked against the
-    scenario ``config`` it will be evaluated in (the same number of pursuers)."""
+    scenario ``config`` it will be evaluated in (the same number of pursuers), on ``device``
+    (``"cpu"``, ``"cuda"``...: where its networks run, whatever device it was trained on)."""
     from benchmarl.experiment import Experiment
 
     path = Path(path)
-    patch = {"loggers": [], "create_json": False, "restore_map_location": "cpu"}
+    patch = {
+        "loggers": [],
+        "create_json": False,
+        "restore_map_location": device,
+        "sampling_device": device,
+        "train_device": device,
+    }
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # BenchMARL prints its whole config
             experiment = Experiment.reload_from_file(str(path), experiment_patch=patch)
@@ -41,7 +50,7 @@ def load_benchmarl_policy(path: str | Path, config: EnvConfig) -> TorchRLPolicy:
             f"{path} was trained with {len(agents)} pursuers, the scenario has "
             f"{config.num_pursuers} (set num_pursuers={len(agents)})"
         )
-    return TorchRLPolicy(experiment.policy)
+    return TorchRLPolicy(experiment.policy.to(device))
 
 
 __all__ = ["load_benchmarl_policy"]
