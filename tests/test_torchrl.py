@@ -342,10 +342,12 @@ def test_pes_eval_measures_a_benchmarl_checkpoint(tmp_path, algorithm, capsys):
     experiment.config.checkpoint_at_end = True
     experiment.run()
     (checkpoint,) = tmp_path.glob("*/checkpoints/checkpoint_*.pt")
+    run = {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()}
     scenario = ["--set", "num_pursuers=3", "--set", "capture_count=2", "--set", "max_steps=20"]
     assert main(["eval", "--policy", str(checkpoint), "--episodes", "3", "--json", *scenario]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["episodes"] == 3 and result["policy"] == str(checkpoint)
+    assert {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()} == run  # untouched
 
     config = pes.EnvConfig(num_pursuers=3, capture_count=2, max_steps=20)
     policy = make_policy(str(checkpoint), config)
@@ -449,3 +451,26 @@ def test_a_reference_run_diverging_before_its_first_checkpoint_fails_in_one_line
     assert err.startswith("error: ippo seed 0: training diverged (actions hold NaN")
     assert "before its first checkpoint" in err and "\n" not in err
     assert not (out / "result.json").exists()
+
+
+@pytest.mark.slow
+def test_pes_eval_loads_a_checkpoint_of_the_reference_command(tmp_path, capsys):
+    """``python -m pes.benchmarl.reference`` pickles its callback into the run's config.pkl;
+    another process (``pes eval``) must be able to load the run's checkpoint from it."""
+    optional("benchmarl")
+    import json
+    import subprocess
+    import sys
+
+    from pes.cli import main
+
+    command = [sys.executable, "-m", "pes.benchmarl.reference", "--algorithm", "mappo"]
+    budget = ["--frames", "6000", "--eval-episodes", "2", "--out", str(tmp_path)]
+    run = subprocess.run(
+        [*command, *budget], capture_output=True, text=True, timeout=600,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    (checkpoint,) = tmp_path.glob("*/checkpoints/checkpoint_6000.pt")
+    assert main(["eval", "--policy", str(checkpoint), "--episodes", "2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["episodes"] == 2

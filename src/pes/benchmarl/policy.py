@@ -7,15 +7,18 @@ BenchMARL writes a checkpoint of the whole experiment every ``checkpoint_interva
 (and one at the end with ``checkpoint_at_end``) into ``<experiment>/checkpoints/`` and its
 configuration beside them (``<experiment>/config.pkl``): that layout is what ``pes eval``
 recognises. :func:`load_benchmarl_policy` rebuilds the experiment from them
-with BenchMARL's own ``Experiment.reload_from_file`` (loggers off) and wraps its policy as a
-:class:`pes.torchrl.TorchRLPolicy`: the mean action of MAPPO's and IPPO's Gaussian, the actor
-of MADDPG and MASAC without exploration noise.
+with BenchMARL's own ``Experiment.reload_from_file`` (loggers off, in a temporary folder, so
+the run's folder is left as it was) and wraps its policy as a
+:class:`pes.torchrl.TorchRLPolicy`: the tanh of the mean of MAPPO's and IPPO's Gaussian
+(TorchRL's deterministic sample of a ``TanhNormal``), the actor of MADDPG and MASAC without
+exploration noise.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import tempfile
 from pathlib import Path
 
 from pes.errors import CheckpointError, ConfigError
@@ -40,8 +43,12 @@ def load_benchmarl_policy(
         "train_device": device,
     }
     try:
-        with contextlib.redirect_stdout(io.StringIO()):  # BenchMARL prints its whole config
-            experiment = Experiment.reload_from_file(str(path), experiment_patch=patch)
+        # BenchMARL writes the rebuilt experiment's config.pkl into its save folder: a
+        # temporary one, so that evaluating a run leaves the run's folder as it was.
+        with tempfile.TemporaryDirectory() as scratch:
+            patch["save_folder"] = scratch
+            with contextlib.redirect_stdout(io.StringIO()):  # it prints its whole config
+                experiment = Experiment.reload_from_file(str(path), experiment_patch=patch)
     except Exception as exc:  # noqa: BLE001 - any failure to rebuild is the file's fault
         raise CheckpointError(f"cannot load the BenchMARL experiment of {path}: {exc}") from exc
     agents = experiment.group_map.get(GROUP, [])

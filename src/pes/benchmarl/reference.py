@@ -204,4 +204,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # Through the importable module: BenchMARL pickles the callbacks (CpuClock) into the run's
+    # config.pkl, which must name pes.benchmarl.reference, not __main__, for another process
+    # (pes eval) to load the run's checkpoints.
+    from pes.benchmarl import reference
+
+    sys.exit(reference.main())
