@@ -11,7 +11,8 @@ every checkpoint still in the folder (checkpoints are not committed: only on the
 trained the run), the policy's pre-tanh Gaussian on the first observations of 200 evaluation
 games (``eval_config``, seed 5): the median |mean| and the median scale of each action axis
 over games and pursuers, and the share of deterministic actions (tanh of the mean) beyond
-0.99 in magnitude. Writes one JSON object. The report: research/benchmarl_ppo_divergence.md.
+0.99 in magnitude. Writes one JSON object (the command, then each run's figures). The
+report: research/benchmarl_ppo_divergence.md.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import argparse
 import csv
 import json
 import math
+import sys
 from pathlib import Path
 
 import torch
@@ -97,7 +99,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    report = {str(run): {**logs(run), "checkpoints": checkpoints(run)} for run in args.runs}
+    report = {
+        "command": " ".join(
+            ["python", "research/probes/benchmarl_ppo_saturation.py", *sys.argv[1:]]
+        ),
+        "runs": {str(run): {**logs(run), "checkpoints": checkpoints(run)} for run in args.runs},
+    }
     text = json.dumps(report, indent=1, allow_nan=False)
     args.out.write_text(text + "\n")
     print(text)
