@@ -8,6 +8,8 @@ CI): ``pip install -e ".[test,torchrl]"`` for the TorchRL tests, ``pip install -
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -35,6 +37,14 @@ def fixed_policy(seed: int = 0):
         return td.set((GROUP, "action"), torch.rand(shape, generator=gen) * 2 - 1)
 
     return policy
+
+
+def run_module(*args: str, timeout: float) -> subprocess.CompletedProcess:
+    """``python -m ARGS`` in a child process on one torch thread, its output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )  # fmt: skip
 
 
 def test_check_env_specs():
@@ -261,9 +271,6 @@ def test_benchmarl_tasks_run(tmp_path, task_name):
 def test_the_benchmarl_command_line_runs_an_experiment_on_pes(tmp_path):
     """``python -m pes.benchmarl``, BenchMARL's own command line, trains on a PES task."""
     optional("benchmarl")
-    import subprocess
-    import sys
-
     tiny = [
         "experiment.max_n_iters=1", "experiment.max_n_frames=null",
         "experiment.on_policy_collected_frames_per_batch=60",
@@ -273,11 +280,9 @@ def test_the_benchmarl_command_line_runs_an_experiment_on_pes(tmp_path):
         f"experiment.save_folder={tmp_path}", f"hydra.run.dir={tmp_path / 'hydra'}",
     ]  # fmt: skip
     task = ["task.num_pursuers=3", "task.capture_count=2", "task.max_steps=20"]
-    command = [sys.executable, "-m", "pes.benchmarl", "algorithm=mappo", "task=pes/damaged"]
-    run = subprocess.run(
-        [*command, *task, *tiny], capture_output=True, text=True, timeout=300,
-        env={**os.environ, "OMP_NUM_THREADS": "1"},
-    )  # fmt: skip
+    run = run_module(
+        "pes.benchmarl", "algorithm=mappo", "task=pes/damaged", *task, *tiny, timeout=300
+    )
     assert run.returncode == 0, run.stderr[-2000:]
     assert "Algorithm: mappo, Task: pes/damaged" in run.stdout
     (frames,) = tmp_path.glob("*/*/scalars/counters_total_frames.csv")  # BenchMARL's layout
@@ -342,12 +347,16 @@ def test_pes_eval_measures_a_benchmarl_checkpoint(tmp_path, algorithm, capsys):
     experiment.config.checkpoint_at_end = True
     experiment.run()
     (checkpoint,) = tmp_path.glob("*/checkpoints/checkpoint_*.pt")
-    run = {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()}
+
+    def files():
+        return {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()}
+
+    run = files()
     scenario = ["--set", "num_pursuers=3", "--set", "capture_count=2", "--set", "max_steps=20"]
     assert main(["eval", "--policy", str(checkpoint), "--episodes", "3", "--json", *scenario]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["episodes"] == 3 and result["policy"] == str(checkpoint)
-    assert {f: f.read_bytes() for f in tmp_path.rglob("*") if f.is_file()} == run  # untouched
+    assert files() == run  # pes eval leaves the run's folder as it was
 
     config = pes.EnvConfig(num_pursuers=3, capture_count=2, max_steps=20)
     policy = make_policy(str(checkpoint), config)
@@ -459,17 +468,11 @@ def test_pes_eval_loads_a_checkpoint_of_the_reference_command(tmp_path, capsys):
     another process (``pes eval``) must be able to load the run's checkpoint from it."""
     optional("benchmarl")
     import json
-    import subprocess
-    import sys
 
     from pes.cli import main
 
-    command = [sys.executable, "-m", "pes.benchmarl.reference", "--algorithm", "mappo"]
     budget = ["--frames", "6000", "--eval-episodes", "2", "--out", str(tmp_path)]
-    run = subprocess.run(
-        [*command, *budget], capture_output=True, text=True, timeout=600,
-        env={**os.environ, "OMP_NUM_THREADS": "1"},
-    )  # fmt: skip
+    run = run_module("pes.benchmarl.reference", "--algorithm", "mappo", *budget, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     (checkpoint,) = tmp_path.glob("*/checkpoints/checkpoint_6000.pt")
     assert main(["eval", "--policy", str(checkpoint), "--episodes", "2", "--json"]) == 0

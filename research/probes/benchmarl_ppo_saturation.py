@@ -26,13 +26,12 @@ from pathlib import Path
 
 import torch
 from benchmarl.experiment.callback import Callback
-from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 import pes
 from pes.benchmarl.policy import load_benchmarl_policy
 from pes.experiments.budgets import BUDGETS, eval_config
-from pes.torchrl import GROUP, flatten_observation
+from pes.torchrl import GROUP
 
 
 class CpuClock(Callback):
@@ -70,20 +69,11 @@ def checkpoints(run: Path) -> dict:
     cfg = eval_config(BUDGETS["quick"])
     env = pes.make_env(cfg, num_envs=200, seed=5)
     obs, info = env.reset(seed=5)
-    alive = info["obs_mask"][:, :, 0]
-    group = {"observation": flatten_observation(obs, info["obs_mask"]), "mask": alive}
     found = {}
     for path in sorted(run.glob("*/checkpoints/checkpoint_*.pt")):
         policy = load_benchmarl_policy(path, cfg)
-        td = TensorDict(
-            {
-                GROUP: TensorDict({**group, "obs_mask": info["obs_mask"]}, alive.shape),
-                "state": info["state"].flatten(1),
-            },
-            alive.shape[:1],
-        )
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-            out = policy.module(td)
+            out = policy.module(policy.tensordict(obs, info))
         loc, scale, action = (out[GROUP, k].flatten(0, 1) for k in ("loc", "scale", "action"))
         found[path.stem] = {
             "median_abs_mean_per_axis": [round(v, 2) for v in loc.abs().median(0).values.tolist()],

@@ -387,9 +387,9 @@ class TorchRLPolicy:
         params = next(iter(module.parameters()), None) if hasattr(module, "parameters") else None
         self.device = params.device if params is not None else torch.device("cpu")
 
-    def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
-        from torchrl.envs.utils import ExplorationType, set_exploration_type
-
+    def tensordict(self, obs: Tensor, info: dict[str, Tensor]) -> TensorDict:
+        """The module's input for the simulator's ``obs`` (E, N, N, 8) and ``info``, on the
+        module's device: what :class:`PESTorchRLEnv` gives a policy (the keys of ``READS``)."""
         alive = info["obs_mask"][:, :, 0]
         group = TensorDict(
             {
@@ -402,8 +402,13 @@ class TorchRLPolicy:
         td = TensorDict(
             {GROUP: group, "state": info["state"].flatten(1)}, batch_size=alive.shape[:1]
         )
+        return td if obs.device == self.device else td.to(self.device)
+
+    def __call__(self, obs: Tensor, info: dict[str, Tensor]) -> Tensor:
+        from torchrl.envs.utils import ExplorationType, set_exploration_type
+
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-            out = self.module(td.to(self.device))
+            out = self.module(self.tensordict(obs, info))
         return out.get((GROUP, "action")).to(obs.device).clamp(-1.0, 1.0)
 
     def reset(self, mask: Tensor | None = None) -> None:

@@ -30,18 +30,13 @@ def load_benchmarl_policy(
     path: str | Path, config: EnvConfig, device: str = "cpu"
 ) -> TorchRLPolicy:
     """The deterministic policy of the BenchMARL checkpoint ``path``, checked against the
-    scenario ``config`` it will be evaluated in (the same number of pursuers), on ``device``
-    (``"cpu"``, ``"cuda"``...: where its networks run, whatever device it was trained on)."""
+    scenario ``config`` it will be evaluated in (the same number of pursuers). The experiment is
+    rebuilt on the CPU, whatever device it trained on (its replay buffer stays there); the
+    policy's networks then move to ``device`` (``"cpu"``, ``"cuda"``...)."""
     from benchmarl.experiment import Experiment
 
     path = Path(path)
-    patch = {
-        "loggers": [],
-        "create_json": False,
-        "restore_map_location": device,
-        "sampling_device": device,
-        "train_device": device,
-    }
+    patch = {"loggers": [], "create_json": False, "restore_map_location": "cpu"}
     try:
         # BenchMARL writes the rebuilt experiment's config.pkl into its save folder: a
         # temporary one, so that evaluating a run leaves the run's folder as it was.
