@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import os
 from types import ModuleType
+from typing import NoReturn
 
 import pytest
 import torch
@@ -31,13 +32,21 @@ def _one_thread():
     yield
 
 
-def optional(module: str) -> ModuleType:
-    """``pytest.importorskip(module)`` for a package of an optional extra, except under
-    ``PES_REQUIRE_EXTRAS=1`` (as in CI, which installs every extra the tests use), where a
-    missing or broken install fails instead of skipping."""
+def unavailable(reason: str) -> NoReturn:
+    """Skip the test for something it needs that is not installed, except under
+    ``PES_REQUIRE_EXTRAS=1`` (as in CI, which installs every optional package and the Chromium
+    the tests use), where that is a failure."""
     if os.environ.get("PES_REQUIRE_EXTRAS") == "1":
+        pytest.fail(f"{reason}; PES_REQUIRE_EXTRAS=1 requires it")
+    pytest.skip(reason, allow_module_level=True)
+
+
+def optional(module: str) -> ModuleType:
+    """``module`` imported, for a package of an optional extra; else :func:`unavailable`."""
+    try:
         return importlib.import_module(module)
-    return pytest.importorskip(module)
+    except ImportError as exc:
+        unavailable(f"needs {module} ({exc})")
 
 
 @pytest.fixture

@@ -1,12 +1,11 @@
 """``pes view``: the page, its data, the command, and the page replayed in a real headless
-Chromium (skipped where Chromium is absent, unless PES_REQUIRE_CHROMIUM=1 as in CI)."""
+Chromium (skipped where Chromium is absent, unless PES_REQUIRE_EXTRAS=1 as in CI)."""
 
 from __future__ import annotations
 
 import base64
 import io
 import json
-import os
 import re
 import shutil
 import subprocess
@@ -20,6 +19,7 @@ from PIL import Image, ImageChops
 from pes.cli import main
 from pes.record import build_page, load_record
 from pes.record.viewer import ASSETS, DEFAULT_BUILDING_HEIGHT, scene_data
+from tests.conftest import unavailable
 
 
 @pytest.fixture(scope="module")
@@ -202,9 +202,7 @@ def browser():
             f"needs {' and '.join(missing)} (Debian: apt-get install chromium chromium-driver; "
             "selenium comes with the 'test' extra)"
         )
-        if os.environ.get("PES_REQUIRE_CHROMIUM") == "1":
-            pytest.fail(reason + "; PES_REQUIRE_CHROMIUM=1 requires it")
-        pytest.skip(reason)
+        unavailable(reason)
     options = webdriver.ChromeOptions()
     options.binary_location = shutil.which("chromium")
     for flag in CHROMIUM_FLAGS:
