@@ -7,7 +7,8 @@
 #                                                   # script's time (default 540 s)
 #
 # 1. the CUDA tests: the step on the GPU against the CPU's from the same states, a PID(PF)
-#    restored from a checkpoint;
+#    restored from a checkpoint; where torchrl and benchmarl import, the TorchRL environment on
+#    CUDA and `pes eval --device cuda` of a BenchMARL checkpoint (skipped where they do not);
 # 2. simulator throughput at large batches, as make_env gives it (sim_cuda.json) and fused by
 #    torch.compile (sim_cuda_compiled.json);
 # 3. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
@@ -38,6 +39,9 @@ python3 -c "import torch; print(torch.__version__, torch.cuda.get_device_name(0)
 part pytest-cuda
 timeout "$(lim 90)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py tests/test_kernels.py \
     tests/test_policies.py -k "cuda or gpu" 2>&1 | tail -3 | tee -a "$LOG"
+part pytest-cuda-torchrl
+timeout "$(lim 100)" python3 -m pytest -q -p no:cacheprovider tests/test_torchrl.py -rs \
+    -k "cuda or measures_a_benchmarl_checkpoint" 2>&1 | tail -3 | tee -a "$LOG"
 part bench-sim
 timeout "$(lim 60)" python3 benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 1048576 \
     --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
