@@ -37,11 +37,9 @@ part machine
 nvidia-smi -L 2>&1 | tee -a "$LOG"
 python3 -c "import torch; print(torch.__version__, torch.cuda.get_device_name(0))" 2>&1 | tee -a "$LOG"
 part pytest-cuda
-timeout "$(lim 90)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py tests/test_kernels.py \
-    tests/test_policies.py -k "cuda or gpu" 2>&1 | tail -3 | tee -a "$LOG"
-part pytest-cuda-torchrl
-timeout "$(lim 100)" python3 -m pytest -q -p no:cacheprovider tests/test_torchrl.py -rs \
-    -k "cuda or measures_a_benchmarl_checkpoint" 2>&1 | tail -3 | tee -a "$LOG"
+timeout "$(lim 120)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py tests/test_kernels.py \
+    tests/test_policies.py tests/test_torchrl.py -k "cuda or gpu or measures_a_benchmarl_checkpoint" \
+    2>&1 | tail -3 | tee -a "$LOG"
 part bench-sim
 timeout "$(lim 60)" python3 benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 1048576 \
     --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
