@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -172,6 +173,30 @@ def test_table6_with_ray(tmp_path):
     assert summary["runner"] == "ray" and summary["ran"] == 1
     assert "CBC-TP Net with damaged pursuers" in (tmp_path / "table6.md").read_text()
     assert json.loads((tmp_path / "trials" / "cbc-tp-s0" / "done.json").read_text())["evals"]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is not installed")
+def test_failed_ray_trial_is_one_line(tmp_path):
+    """A trial that fails under Ray ends the sweep with a one-line PESError naming the trial,
+    the error's last line and the file that holds its traceback; the other trial finishes."""
+    from pes.experiments.sweep import SweepProgress, run_ray
+
+    def runner(spec, out, threads):
+        if spec["id"] == "bad-s0":
+            raise ValueError("the trial broke")
+        (out / f"{spec['id']}.done").write_text("1")
+
+    specs = [{"id": "bad-s0"}, {"id": "good-s0"}]
+    view = SweepProgress(len(specs), 0, enabled=False)
+    with pytest.raises(pes.errors.TrialsFailedError) as caught:
+        run_ray(specs, tmp_path, None, view, runner, parallel=1, name="failing")
+    message = str(caught.value)
+    assert "\n" not in message and message.startswith("1 trial(s) failed (bad-s0)")
+    assert "ValueError: the trial broke" in message
+    traceback = message.split("traceback: '")[1].split("'")[0]
+    assert "the trial broke" in Path(traceback).read_text()
+    assert (tmp_path / "good-s0.done").is_file()
 
 
 def test_budget_training_configs():

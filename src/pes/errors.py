@@ -25,3 +25,8 @@ class CheckpointError(PESError):
 
 class TrainingInterruptedError(PESError):
     """A training run stopped by SIGINT or SIGTERM after writing its checkpoint."""
+
+
+class TrialsFailedError(PESError):
+    """Trials of a sweep (``pes reproduce``, ``pes tune``) that Ray reported as failed; their
+    tracebacks are in Ray's trial folders, and rerunning the command resumes them."""

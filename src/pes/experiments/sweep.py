@@ -13,7 +13,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from pes.errors import ConfigError
+from pes.errors import ConfigError, TrialsFailedError
 
 
 def choose_runner(use_ray: bool | None, ray_address: str | None) -> bool:
@@ -88,6 +88,18 @@ def _on_trial(event: str, trial: str) -> None:
         getattr(_ACTIVE_VIEW, event)(trial)
 
 
+def failure_message(failed: list) -> str:
+    """One line for the Ray results ``failed`` (each with ``config``, ``error`` and ``path``):
+    which trials failed, the last line of the first one's error and where its traceback is."""
+    ids = ", ".join(r.config["spec"]["id"] for r in failed)
+    lines = [line.strip() for line in str(failed[0].error).splitlines() if line.strip()]
+    cause = lines[-1] if lines else type(failed[0].error).__name__
+    return (
+        f"{len(failed)} trial(s) failed ({ids}): {cause} (traceback: "
+        f"'{Path(failed[0].path) / 'error.txt'}'); run the command again to resume them"
+    )
+
+
 def run_ray(
     specs: list[dict],
     out: Path,
@@ -147,7 +159,7 @@ def run_ray(
         results = tuner.fit()
         failed = [r for r in results if r.error is not None]
         if failed:
-            raise RuntimeError(f"{len(failed)} trial(s) failed; first: {failed[0].error}")
+            raise TrialsFailedError(failure_message(failed))
     finally:
         _ACTIVE_VIEW = None
         ray.shutdown()
