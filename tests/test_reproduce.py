@@ -99,6 +99,7 @@ def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_pa
         "table4", budget="tiny", seeds=2, out=out, methods=METHODS, use_ray=False, report_only=True
     )
     assert summary["ran"] == 0 and summary["skipped"] == 3 and summary["unfinished"] == 3
+    assert summary["runner"] == "none"
     assert "Seeds per method: PID(PF) 1" in (out / "table4.md").read_text()
     assert not (out / "trials" / "cbc-s1").exists()
     # A part of the sweep (--methods) reports every finished trial in the folder.

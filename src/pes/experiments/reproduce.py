@@ -149,7 +149,8 @@ def reproduce(
         "overrides": dict(overrides or {}),
         "seeds": seeds,
         "out": str(out),
-        "runner": "ray" if use_ray else "sequential",
+        # The runner that ran this call's trials; "none" when nothing ran (``--report-only``).
+        "runner": ("ray" if use_ray else "sequential") if todo else "none",
         "trials": len(specs),
         "skipped": finished,
         "ran": len(todo),
