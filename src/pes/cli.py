@@ -462,9 +462,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(summary)
     else:
+        runner = f" ({summary['runner']})" if summary["ran"] else ""
         print(
-            f"done: {summary['ran']} trial(s) run, {summary['skipped']} already finished, "
-            f"{summary['unfinished']} not run ({summary['runner']}), {summary['seconds']:.0f} s; "
+            f"done: {summary['ran']} trial(s) run{runner}, {summary['skipped']} already finished, "
+            f"{summary['unfinished']} not run, {summary['seconds']:.0f} s; "
             f"wrote in {out}: " + ", ".join(f for f in summary["files"] if "/" not in f)
         )
     return 0
