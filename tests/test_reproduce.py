@@ -92,7 +92,7 @@ def test_rerun_skips_finished_trials(sweep):
 
 
 @pytest.mark.slow
-def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_path):
+def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_path, capsys):
     out, _ = sweep
     (out / "table4.md").unlink()
     summary = reproduce(
@@ -103,10 +103,9 @@ def test_report_only_runs_nothing_and_shows_outside_reference_runs(sweep, tmp_pa
     assert "Seeds per method: PID(PF) 1" in (out / "table4.md").read_text()
     assert not (out / "trials" / "cbc-s1").exists()
     # A part of the sweep (--methods) reports every finished trial in the folder.
-    reproduce(
-        "table4", budget="tiny", seeds=1, out=out, methods=["pid-pf"], use_ray=False,
-        report_only=True,
-    )  # fmt: skip
+    argv = ["reproduce", "table4", "--budget", "tiny", "--seeds", "1", "--out", str(out)]
+    assert main([*argv, "--methods", "pid-pf", "--no-ray", "--report-only"]) == 0
+    assert "done: 0 trial(s) run (none), 1 already finished, 0 not run" in capsys.readouterr().out
     assert "| CBC-TP Net |" in (out / "table4.md").read_text()
     # Outside reference runs (the records pes.benchmarl.reference writes) as Table IV columns;
     # the evaluation of PID(PF)'s trial stands in for a reference run's here.

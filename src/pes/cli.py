@@ -442,7 +442,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from pes.experiments.reproduce import reproduce
 
     out = args.out or f"runs/reproduce-{args.budget}"
-    _say(args, f"reproducing {args.target} ({args.budget} budget, {args.seeds} seeds) into {out}")
+    _say(args, f"reproducing {args.target} ({args.budget} budget, {args.seeds} seed(s)) into {out}")
     summary = reproduce(
         args.target,
         budget=args.budget,
@@ -462,9 +462,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(summary)
     else:
-        runner = f" ({summary['runner']})" if summary["ran"] else ""
         print(
-            f"done: {summary['ran']} trial(s) run{runner}, {summary['skipped']} already finished, "
+            f"done: {summary['ran']} trial(s) run ({summary['runner']}), "
+            f"{summary['skipped']} already finished, "
             f"{summary['unfinished']} not run, {summary['seconds']:.0f} s; "
             f"wrote in {out}: " + ", ".join(f for f in summary["files"] if "/" not in f)
         )
