@@ -207,7 +207,7 @@ def test_budget_training_configs():
     for algo in ("cbc-tp", "ppo", "maac"):
         preset = build_train_config(algo, "quick")
         cfg = train_config({"algo": algo, "seed": 2}, BUDGETS["quick"])
-        assert cfg.env_steps == preset.env_steps == 1_000_000
+        assert cfg.env_steps == preset.env_steps == 2_000_000
         assert cfg.episodes == preset.episodes and cfg.time_limit == 0.0
         assert cfg.seed == 2 and cfg.preset == "quick" and cfg.eval_episodes == 0
     cfg = train_config({"algo": "cbc-tp", "seed": 0}, BUDGETS["paper"])
@@ -485,6 +485,15 @@ def test_set_changes_every_learner_s_training_and_a_folder_keeps_one_choice(swee
     (begun / "spec.json").write_text(json.dumps({**specs[1], "budget": "tiny"}))
     with pytest.raises(pes.errors.ConfigError, match="maddpg-s0 .* was made with other settings"):
         reproduce("table4", budget="tiny", seeds=1, out=tmp_path / "begun", methods=["maddpg"])
+    # A --set that restates what the preset resolves to is the same training: the folder is
+    # reported under the plain command (as after a preset adopted a --set as its default).
+    default = train_config(make_trials(["maddpg"], 1, "tiny", False)[0], BUDGETS["tiny"]).protocol.n_step
+    restated = tmp_path / "restated"
+    argv[argv.index("--out") + 1 :] = [str(restated), "--set", f"protocol.n_step={default}"]
+    assert main(argv) == 0
+    plain = reproduce("table4", budget="tiny", seeds=1, out=restated, methods=["maddpg"])
+    assert plain["skipped"] == 1 and plain["ran"] == 0
+    assert "--set" not in (restated / "table4.md").read_text()
 
 
 def test_recorded_commands_name_folders_as_the_repository_has_them(tmp_path):

@@ -18,12 +18,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from pes.algos import ALGOS
 from pes.errors import ConfigError
 from pes.experiments.paper import METHODS
 from pes.experiments.report import write_report
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
-from pes.experiments.trials import BUDGETS, make_trials, run_trial
+from pes.experiments.trials import BUDGETS, make_trials, run_trial, train_config
 from pes.learn.protocol import PROTOCOLS
 
 TARGETS = ("table4", "table5", "table6", "figures", "all")
@@ -60,7 +62,9 @@ def check_trials(out: Path, specs: list[dict]) -> None:
     """Raise :class:`ConfigError` if a trial in ``out``, finished (``done.json``) or begun
     (``spec.json``, written before its training), was made with another spec (another
     protocol or other ``--set`` keys) than the one asked for now: it would be skipped or
-    resumed under the wrong settings."""
+    resumed under the wrong settings. A training trial whose spec differs only in its ``--set``
+    keys is the same trial when the configuration it recorded (``run/config.yaml``) is the one
+    the spec asked for now resolves to (a ``--set`` that a later preset made its default)."""
     for spec in specs:
         folder = out / "trials" / spec["id"]
         for path in (folder / "spec.json", folder / "done.json"):
@@ -68,11 +72,29 @@ def check_trials(out: Path, specs: list[dict]) -> None:
                 continue
             record = json.loads(path.read_text())
             made = record.get("spec", record)  # done.json holds its spec, spec.json is one
-            if made != spec:
+            if made != spec and not same_training(folder, made, spec):
                 raise ConfigError(
                     f"trial {spec['id']} in {out} was made with other settings ({made}, not "
                     f"{spec}); use another --out"
                 )
+
+
+def same_training(folder: Path, made: dict, spec: dict) -> bool:
+    """Whether the training trial in ``folder``, made with spec ``made``, trained with the
+    configuration that ``spec`` resolves to now: the specs agree but for their ``set`` keys
+    and its recorded ``run/config.yaml`` equals ``spec``'s resolved config (threads apart)."""
+    recorded = folder / "run" / "config.yaml"
+    if spec["kind"] != "train" or not recorded.is_file():
+        return False
+    if {k: v for k, v in made.items() if k != "set"} != {
+        k: v for k, v in spec.items() if k != "set"
+    }:
+        return False
+    # through YAML as config.yaml was written, so that both sides hold the same types
+    asked = yaml.safe_load(yaml.safe_dump(train_config(spec, BUDGETS[spec["budget"]]).to_dict()))
+    trained = yaml.safe_load(recorded.read_text())
+    asked.pop("threads", None), trained.pop("threads", None)
+    return asked == trained
 
 
 def reproduce(
