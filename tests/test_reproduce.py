@@ -199,6 +199,20 @@ def test_failed_ray_trial_is_one_line(tmp_path):
     assert (tmp_path / "good-s0.done").is_file()
 
 
+def test_tuning_trials_train_half_the_quick_budget_by_default():
+    """``pes tune``'s default budget is half the preset's env steps (the quick presets'
+    2,000,000 give searches of 1,000,000, as results/tuning was made); a preset budgeted in
+    episodes needs --env-steps."""
+    from pes.algos import build_train_config
+    from pes.experiments.tune import preset_env_steps
+
+    for algo in ("cbc-tp", "maddpg", "ppo"):
+        quick = build_train_config(algo, "quick").env_steps
+        assert preset_env_steps(algo, "quick", "pes") == quick // 2 == 1_000_000
+    with pytest.raises(pes.errors.ConfigError, match="no env_steps budget: give --env-steps"):
+        preset_env_steps("maddpg", "paper", "paper")
+
+
 def test_budget_training_configs():
     """quick trains each method on its whole quick preset (its env steps, no time limit);
     paper keeps the paper preset's episodes; every trial gets its seed."""

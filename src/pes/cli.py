@@ -822,8 +822,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive,
         default=0,
         metavar="N",
-        help="env steps of the trials that train longest (default: the preset's budget, 1,000,000 "
-        "for quick; the other presets need it)",
+        help="env steps of the trials that train longest (default: half the preset's budget, "
+        "1,000,000 for quick; the other presets need it)",
     )
     p.add_argument(
         "--halvings",

@@ -8,8 +8,9 @@ width) by random search from a fixed seed; trial 0 is the preset itself (its val
 keys, written out, so that a trial's settings stay what they were when the preset later
 changes). Each trial trains the quick preset with its settings under the chosen protocol, on
 one torch thread, and the budget is experience, not time: ``env_steps`` control steps of one
-environment (the quick preset's budget by default), the same work on every machine and beside
-any other job.
+environment (by default half of the preset's budget: 1,000,000 for the quick presets' 2,000,000,
+so that a search of 8 trials costs about three of the trainings it tunes), the same work on
+every machine and beside any other job.
 
 The budget is spent by successive halving: every trial trains to ``env_steps / 2**halvings``
 env steps and is scored; the better half trains on to twice that and is scored again; and so on
@@ -124,8 +125,9 @@ def make_tune_trials(
 
 
 def preset_env_steps(algo: str, preset: str, protocol: str) -> int:
-    """The env-step budget of ``algo``'s ``preset`` (``pes tune``'s default trial budget)."""
-    steps = build_train_config(algo, preset, {}, protocol=protocol).env_steps
+    """``pes tune``'s default trial budget: half the env-step budget of ``algo``'s ``preset``
+    (1,000,000 for the quick presets)."""
+    steps = build_train_config(algo, preset, {}, protocol=protocol).env_steps // 2
     if steps < 1:
         raise ConfigError(
             f"the {preset} preset of {algo} has no env_steps budget: give --env-steps"

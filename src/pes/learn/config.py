@@ -100,7 +100,7 @@ class TrainConfig:
     """Method (see ``pes train --help``)."""
     preset: str = "quick"
     """Budget preset applied under the user's settings: ``paper`` (the paper's settings),
-    ``quick`` (1,000,000 env steps: about an hour of one CPU thread) or ``tiny`` (tests)."""
+    ``quick`` (2,000,000 env steps: one to two hours of one CPU thread) or ``tiny`` (tests)."""
     protocol: Protocol = field(default_factory=Protocol)
     """The training protocol (:mod:`pes.learn.protocol`): ``paper`` or ``pes`` and its aids."""
     learner: Any = None
