@@ -161,6 +161,7 @@ def reproduction_lines() -> list[str]:
     def stat(kind: str, field: str, scale: float, digits: int, unit: str = "") -> str:
         return over_seeds([t["evals"][kind][field] for t in trials], scale, digits, unit)
 
+    steps = " or ".join(sorted({f"{t['train']['env_steps']:,}" for t in trials}))
     rows = [
         f"| {k} damaged | {stat(kind, 'success_rate', 100, 1, ' %')} "
         f"| {stat(kind, 'mean_steps', 1, 0)} |"
@@ -171,7 +172,7 @@ def reproduction_lines() -> list[str]:
         "",
         "## The `quick` preset trained from scratch",
         "",
-        f"This file is a longer training's pick. The `quick` preset itself (1,000,000 env steps "
+        f"This file is a longer training's pick. The `quick` preset itself ({steps} env steps "
         f"under the `pes` protocol, one torch thread), trained from scratch on {len(trials)} "
         "seeds by `pes reproduce table4 --methods cbc-tp --seeds 3 --out results/quick` and "
         "evaluated as the rows above (1000 episodes per row, disturbance on, crashes disable, "

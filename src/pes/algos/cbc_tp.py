@@ -135,7 +135,7 @@ CBC_PRESETS: dict[str, dict[str, Any]] = {
     "quick": {**QUICK_RUN, **QUICK_LEARNER, **CBC_TUNED},
     "tiny": {**TINY_RUN, **TINY_LEARNER, "protocol": TINY_PROTOCOL},
 }
-"""CBC Net's presets: ``quick`` trains the shared quick budget (1,000,000 env steps)."""
+"""CBC Net's presets: ``quick`` trains the shared quick budget (2,000,000 env steps)."""
 
 TP_QUICK = dict(tp_hidden=64, lr_tp=1e-3, tp_batch_size=256, tp_update_every=4)
 CBC_TP_TUNED: dict[str, Any] = dict(lr_actor=1.8e-3, lr_critic=2.67e-3, batch_size=512, hidden=32)

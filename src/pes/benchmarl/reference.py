@@ -9,8 +9,8 @@ own protocol (``pes eval``'s: 1000 episodes, disturbance on, crashes disable, th
 evader; the seeds of ``pes reproduce``).
 
 The budget is experience: ``--frames`` (BenchMARL's ``max_n_frames``; a frame is one step of one
-environment, as PES's ``env_steps``), by default the quick presets' 1,000,000, the same work on
-any machine and beside any job. A checkpoint is written every ``--checkpoint-every``
+environment, as PES's ``env_steps``), by default the quick presets' 2,000,000, the same work on
+any machine and beside any job (the runs in results/benchmarl trained 1,000,000). A checkpoint is written every ``--checkpoint-every``
 iterations, so running the same command again resumes from the last checkpoint (the
 iterations after it are done again). Writes ``OUT/<experiment>/`` (BenchMARL's folder: CSV logs,
 checkpoints, ``config.pkl``), ``OUT/cpu.json`` (the CPU time spent, for the record) and
@@ -179,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--algorithm", required=True, choices=list(ALGORITHMS))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
-        "--frames", type=int, default=0, help="env steps (default: the quick presets' 1,000,000)"
+        "--frames", type=int, default=0, help="env steps (default: the quick presets' 2,000,000)"
     )
     parser.add_argument("--eval-episodes", type=int, default=1000)
     parser.add_argument("--checkpoint-every", type=int, default=10, help="iterations")
