@@ -394,9 +394,11 @@ def test_benchmarl_reference_run_stops_at_its_frame_budget_and_is_evaluated(tmp_
     steps) with a checkpoint, that checkpoint evaluated with PES's protocol; a second call
     reads the result; a larger budget resumes from the checkpoint."""
     optional("benchmarl")
+    from pes.algos import build_train_config
     from pes.benchmarl.reference import quick_frames, run_reference
 
-    assert quick_frames() == 1_000_000
+    # by default the budget of PES's learners in the quick presets
+    assert quick_frames() == build_train_config("maddpg", "quick").env_steps == 2_000_000
     small = {
         "on_policy_collected_frames_per_batch": 60,
         "on_policy_n_envs_per_worker": 2,
