@@ -501,7 +501,8 @@ def test_set_changes_every_learner_s_training_and_a_folder_keeps_one_choice(swee
         reproduce("table4", budget="tiny", seeds=1, out=tmp_path / "begun", methods=["maddpg"])
     # A --set that restates what the preset resolves to is the same training: the folder is
     # reported under the plain command (as after a preset adopted a --set as its default).
-    default = train_config(make_trials(["maddpg"], 1, "tiny", False)[0], BUDGETS["tiny"]).protocol.n_step
+    tiny = make_trials(["maddpg"], 1, "tiny", False)[0]
+    default = train_config(tiny, BUDGETS["tiny"]).protocol.n_step
     restated = tmp_path / "restated"
     argv[argv.index("--out") + 1 :] = [str(restated), "--set", f"protocol.n_step={default}"]
     assert main(argv) == 0

@@ -8,17 +8,17 @@ the ``pes`` protocol), on one torch thread; then its last checkpoint is evaluate
 own protocol (``pes eval``'s: 1000 episodes, disturbance on, crashes disable, the default
 evader; the seeds of ``pes reproduce``).
 
-The budget is experience: ``--frames`` (BenchMARL's ``max_n_frames``; a frame is one step of one
-environment, as PES's ``env_steps``), by default the quick presets' 2,000,000, the same work on
-any machine and beside any job (the runs in results/benchmarl trained 1,000,000). A checkpoint is written every ``--checkpoint-every``
-iterations, so running the same command again resumes from the last checkpoint (the
-iterations after it are done again). Writes ``OUT/<experiment>/`` (BenchMARL's folder: CSV logs,
-checkpoints, ``config.pkl``), ``OUT/cpu.json`` (the CPU time spent, for the record) and
-``OUT/result.json`` (the command, the counters, the evaluation). A run whose policy puts out
-NaN or infinite actions (its training diverged) stops there: its last checkpoint, written
-before, is evaluated, and ``result.json`` says so (``diverged``; ``frames`` is the
-checkpoint's); one that diverges before its first checkpoint ends with a one-line error and
-no ``result.json``.
+The budget is experience: ``--frames`` (BenchMARL's ``max_n_frames``; a frame is one step of
+one environment, as PES's ``env_steps``), by default the quick presets' 2,000,000, the same
+work on any machine and beside any job (the runs in results/benchmarl trained 1,000,000). A
+checkpoint is written every ``--checkpoint-every`` iterations, so running the same command
+again resumes from the last checkpoint (the iterations after it are done again). Writes
+``OUT/<experiment>/`` (BenchMARL's folder: CSV logs, checkpoints, ``config.pkl``),
+``OUT/cpu.json`` (the CPU time spent, for the record) and ``OUT/result.json`` (the command, the
+counters, the evaluation). A run whose policy puts out NaN or infinite actions (its training
+diverged) stops there: its last checkpoint, written before, is evaluated, and ``result.json``
+says so (``diverged``; ``frames`` is the checkpoint's); one that diverges before its first
+checkpoint ends with a one-line error and no ``result.json``.
 
 What BenchMARL gets and PES's learners get alike: the scenario, the training reward, the
 disturbance, the env steps and the evaluation. What it does not get: the ``pes`` protocol's

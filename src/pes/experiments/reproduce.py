@@ -93,7 +93,8 @@ def same_training(folder: Path, made: dict, spec: dict) -> bool:
     # through YAML as config.yaml was written, so that both sides hold the same types
     asked = yaml.safe_load(yaml.safe_dump(train_config(spec, BUDGETS[spec["budget"]]).to_dict()))
     trained = yaml.safe_load(recorded.read_text())
-    asked.pop("threads", None), trained.pop("threads", None)
+    asked.pop("threads", None)
+    trained.pop("threads", None)
     return asked == trained
 
 
