@@ -458,6 +458,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         protocol=args.protocol,
         outside=args.outside,
         overrides=_overrides(args),
+        scenario=dict(parse_override(text) for text in args.scenario),
     )
     if args.json:
         _print_json(summary)
@@ -790,6 +791,15 @@ def build_parser() -> argparse.ArgumentParser:
         "change a setting of every learner's training, as pes train --set (repeatable), "
         "e.g. --set protocol.n_step=1 to take an aid away; the report names the changes; "
         "use a new --out for each choice",
+    )
+    p.add_argument(
+        "--scenario",
+        metavar="KEY=VALUE",
+        action="append",
+        default=[],
+        help="change one EnvConfig key of every method's task, in training and evaluation "
+        "alike (repeatable), e.g. --scenario evader_max_speed=8 for the positive control of "
+        "an evader slower than the pursuers; the report names it; use a new --out for each",
     )
     p.add_argument("--out", default=None, help="output folder (default: runs/reproduce-BUDGET)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

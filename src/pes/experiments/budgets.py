@@ -101,9 +101,14 @@ def write_json(path: Path, obj: Any) -> None:
     tmp.replace(path)
 
 
-def eval_config(budget: Budget, damaged: int = 0):
+def eval_config(budget: Budget, damaged: int = 0, scenario: dict[str, Any] | None = None):
     """The paper's evaluation scenario (§V-B): disturbance on, damaged pursuers disabled, the
-    shipped DDPG evader calibrated to the paper's (``flee`` if this installation has none)."""
+    shipped DDPG evader calibrated to the paper's (``flee`` if this installation has none);
+    ``scenario``: :class:`pes.EnvConfig` keys that change the task itself (as in training),
+    e.g. ``{"evader_max_speed": 8.0}`` for the positive control."""
     return EnvConfig().for_evaluation(
-        evader_policy=default_evader_policy(), damaged=damaged, **budget.eval_env
+        evader_policy=default_evader_policy(),
+        damaged=damaged,
+        **budget.eval_env,
+        **(scenario or {}),
     )

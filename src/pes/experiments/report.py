@@ -102,6 +102,14 @@ def trained_on(trains: Iterable[dict[str, Any]]) -> str:
     return ", ".join(f"{cpu} ({n})" for cpu, n in counts.most_common())
 
 
+def _task(meta: dict) -> str:
+    """A sentence naming the EnvConfig keys that changed every method's task (training and
+    evaluation alike: ``--scenario k=v``), else ``""``."""
+    pairs = meta.get("scenario") or {}
+    text = [f"`--scenario {k}={v if isinstance(v, str) else json.dumps(v)}`" for k, v in pairs.items()]
+    return "Every method's task, trained and evaluated: " + " ".join(text) + ". " if text else ""
+
+
 def _header(title: str, meta: dict) -> list[str]:
     return [
         f"# {title}",
@@ -109,7 +117,7 @@ def _header(title: str, meta: dict) -> list[str]:
         f"Budget `{meta['budget']}`, every learner trained under the `{meta['protocol']}` "
         f"protocol{_changed(meta)}, {meta['seeds']} seed(s); each evaluation "
         f"{meta['eval_episodes']} episodes with disturbance, crashes disable, against the "
-        f"{meta['evader']}. Mean ± std over seeds. Made by `{meta['command']}` "
+        f"{meta['evader']}. {_task(meta)}Mean ± std over seeds. Made by `{meta['command']}` "
         f"({meta['hardware']}).",
         "",
     ]
@@ -455,19 +463,22 @@ def write_report(
     protocol: str = "pes",
     outside: str | Path | None = None,
     overrides: dict[str, Any] | None = None,
+    scenario: dict[str, Any] | None = None,
 ) -> list[str]:
     """Write every table and figure the finished trials allow; returns the files written.
     ``outside``: a folder of outside reference runs for Table IV (:func:`load_outside`).
-    ``overrides``: the ``--set`` keys every learner's training changed (named in the tables)."""
+    ``overrides``: the ``--set`` keys every learner's training changed (named in the tables).
+    ``scenario``: the EnvConfig keys that changed every method's task (named in the tables)."""
     done = _load(out, specs)
     references = load_outside(outside)
     machine = machine_info()
     trains = [rec["train"] for rec in done.values() if rec.get("train")]  # the learner trials
-    cfg = eval_config(BUDGETS[budget])
+    cfg = eval_config(BUDGETS[budget], scenario=scenario)
     meta = {
         "budget": budget,
         "protocol": protocol,
         "overrides": dict(overrides or {}),
+        "scenario": dict(scenario or {}),
         "seeds": seeds,
         "eval_episodes": BUDGETS[budget].eval_episodes,
         "evader": (

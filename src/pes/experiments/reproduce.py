@@ -27,6 +27,7 @@ from pes.experiments.report import write_report
 from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
 from pes.experiments.trials import BUDGETS, make_trials, run_trial, train_config
 from pes.learn.protocol import PROTOCOLS
+from pes.sim.config import EnvConfig
 
 TARGETS = ("table4", "table5", "table6", "figures", "all")
 
@@ -43,9 +44,10 @@ def trials_for(
     budget: str,
     protocol: str = "pes",
     overrides: dict[str, Any] | None = None,
+    scenario: dict[str, Any] | None = None,
 ) -> list[dict]:
     """The trial specs a target needs, the learners trained under ``protocol`` with
-    ``overrides`` (``pes train --set`` keys)."""
+    ``overrides`` (``pes train --set`` keys), every method in ``scenario`` (EnvConfig keys)."""
     if target not in TARGETS:
         raise ConfigError(f"target must be one of {', '.join(TARGETS)}, got '{target}'")
     if target == "table6":
@@ -55,7 +57,7 @@ def trials_for(
     elif target == "table5":
         methods = []
     tpnet = target in ("table5", "all")
-    return make_trials(methods, seeds, budget, tpnet, protocol, overrides)
+    return make_trials(methods, seeds, budget, tpnet, protocol, overrides, scenario)
 
 
 def check_trials(out: Path, specs: list[dict]) -> None:
@@ -113,6 +115,7 @@ def reproduce(
     protocol: str | None = None,
     outside: str | Path | None = None,
     overrides: dict[str, Any] | None = None,
+    scenario: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
@@ -126,6 +129,9 @@ def reproduce(
     ``overrides``: settings changed for every learner's training (``pes train --set`` keys,
     e.g. ``{"protocol.n_step": 1}`` to take an aid away); the report names them. A folder holds
     one such choice: trials finished or begun with other settings are an error.
+    ``scenario``: :class:`pes.EnvConfig` keys that change the task of every method, in training
+    and evaluation alike (e.g. ``{"evader_max_speed": 8.0}``: the positive control of
+    results/positive_control); the report names them. Table V takes none.
     """
     if budget not in BUDGETS:
         raise ConfigError(f"budget must be one of {', '.join(BUDGETS)}, got '{budget}'")
@@ -138,7 +144,10 @@ def reproduce(
         raise ConfigError(f"--outside: no folder '{outside}'")
     use_ray = choose_runner(use_ray, ray_address)
     methods = list(methods) if methods else available_methods()
-    specs = trials_for(target, methods, seeds, budget, protocol, overrides)
+    scenario = dict(scenario or {})
+    if scenario:
+        EnvConfig.from_dict(scenario)  # a one-line error for a key or value that is not one
+    specs = trials_for(target, methods, seeds, budget, protocol, overrides, scenario)
     out = Path(out)
     check_trials(out, specs)
     out.mkdir(parents=True, exist_ok=True)
@@ -160,16 +169,27 @@ def reproduce(
     # methods asked for now, so that a sweep run in parts (``--methods``) keeps one report.
     wanted = {*available_methods(), *methods}
     everything = trials_for(
-        target, [m for m in METHODS if m in wanted], seeds, budget, protocol, overrides
+        target, [m for m in METHODS if m in wanted], seeds, budget, protocol, overrides, scenario
     )
     report = write_report(
-        out, everything, target, budget, seeds, command, seconds, protocol, outside, overrides
+        out,
+        everything,
+        target,
+        budget,
+        seeds,
+        command,
+        seconds,
+        protocol,
+        outside,
+        overrides,
+        scenario,
     )
     return {
         "target": target,
         "budget": budget,
         "protocol": protocol,
         "overrides": dict(overrides or {}),
+        "scenario": scenario,
         "seeds": seeds,
         "out": str(out),
         # The runner that ran this call's trials; "none" when nothing ran (``--report-only``).

@@ -55,10 +55,14 @@ def make_trials(
     tpnet: bool,
     protocol: str = "pes",
     overrides: dict[str, Any] | None = None,
+    scenario: dict[str, Any] | None = None,
 ) -> list[dict]:
     """The trial specs (JSON-friendly dicts) for ``methods`` x ``seeds`` (and Table V's); the
     learners train under ``protocol`` with ``overrides`` (``pes train --set`` keys, e.g.
-    ``{"protocol.n_step": 1}``) on top of their presets, kept in the spec as ``set``."""
+    ``{"protocol.n_step": 1}``) on top of their presets, kept in the spec as ``set``.
+    ``scenario``: :class:`pes.EnvConfig` keys that change the task for the training and the
+    evaluations of every method (PID(PF) included), kept in the spec as ``scenario``; Table
+    V's trials play the shipped swarm in the default task and take none."""
     for algo in methods:
         if algo != "pid-pf" and algo not in ALGOS:
             raise ConfigError(f"unknown method '{algo}' (available: pid-pf, {', '.join(ALGOS)})")
@@ -78,6 +82,8 @@ def make_trials(
             kind = "pid-pf" if algo == "pid-pf" else "train"
             spec = {"id": trial_id(kind, algo, s), "kind": kind, "algo": algo, "seed": s}
             spec["budget"] = budget
+            if scenario:
+                spec["scenario"] = dict(scenario)
             if kind == "train":
                 spec["protocol"] = protocol
                 if overrides:
@@ -132,7 +138,7 @@ def _run_policy_trial(
     for name, damaged in evaluations(spec).items():
         path = folder / f"eval_{name}.json"
         if not path.is_file():
-            cfg = eval_config(budget, damaged)
+            cfg = eval_config(budget, damaged, spec.get("scenario"))
             policy = _policy(spec, folder, cfg)
             seed = EVAL_SEED + 10_000 * spec["seed"]
             res = evaluate(policy, cfg, budget.eval_episodes, num_envs=EVAL_ENVS, seed=seed)
@@ -153,9 +159,10 @@ def _run_policy_trial(
 
 def train_config(spec: dict, budget: Budget, threads: int = 0):
     """The :class:`pes.learn.config.TrainConfig` of a ``train`` trial: the method's preset of
-    the budget's name, the budget's overrides, the seed, the spec's ``set`` keys."""
+    the budget's name, the budget's overrides, the seed, the spec's ``scenario`` (as ``env``
+    keys) and ``set`` keys."""
     values = {**budget.train, "seed": spec["seed"], "eval_episodes": 0, "threads": threads}
-    values["env"] = dict(budget.train.get("env", {}))
+    values["env"] = dict(budget.train.get("env", {})) | spec.get("scenario", {})
     values.update(spec.get("set", {}))
     protocol = spec.get("protocol")
     return build_train_config(spec["algo"], budget.preset, values, protocol=protocol)
