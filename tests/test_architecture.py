@@ -108,7 +108,7 @@ def test_every_learner_reads_every_key_of_its_config(algo):
     """Build the learner, act, record and update for a few dozen steps, build its policy: every
     field of its config dataclass must have been read (no key that does nothing)."""
     values = dict(FAST, warmup=64, batch_size=32, eval_episodes=0)
-    if algo == "ppo":
+    if ALGOS[algo].on_policy:
         values = dict(FAST, batch_size=32, rollout_steps=8, eval_episodes=0)
     if algo == "cbc-tp":
         values["tp_batch_size"] = 32

@@ -9,12 +9,13 @@ from pes.algos.ddpg import DDPG
 from pes.algos.evader_ddpg import EvaderDDPG
 from pes.algos.maac import MAAC
 from pes.algos.maddpg import MADDPG
+from pes.algos.mappo import MAPPO
 from pes.algos.ppo import PPO
 from pes.errors import ConfigError
 from pes.learn.learner import Learner
 
 ALGOS: dict[str, type[Learner]] = {
-    cls.name: cls for cls in (CBCTP, CBCNet, MADDPG, DDPG, PPO, BiCNet, MAAC, EvaderDDPG)
+    cls.name: cls for cls in (CBCTP, CBCNet, MADDPG, DDPG, PPO, MAPPO, BiCNet, MAAC, EvaderDDPG)
 }
 """Method name -> learner class."""
 

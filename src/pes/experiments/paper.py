@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-METHODS = ("pid-pf", "ppo", "ddpg", "maddpg", "bicnet", "maac", "cbc", "cbc-tp")
-"""Table IV's columns in the paper's order, with the CBC Net ablation (§V-C) before CBC-TP."""
+METHODS = ("pid-pf", "ppo", "mappo", "ddpg", "maddpg", "bicnet", "maac", "cbc", "cbc-tp")
+"""Table IV's columns in the paper's order, with MAPPO (Yu et al., 2022: the standard
+centralised-value PPO, not in the paper) after PPO and the CBC Net ablation (§V-C) before
+CBC-TP."""
 
 LABELS = {
     "pid-pf": "PID(PF)",
     "ppo": "PPO",
+    "mappo": "MAPPO",
     "ddpg": "DDPG",
     "maddpg": "MADDPG",
     "bicnet": "BiCNet",
@@ -19,6 +22,7 @@ LABELS = {
 TABLE4: dict[str, dict[str, float | None]] = {
     "pid-pf": {"success_rate": 0.273, "mean_steps": 482, "mean_reward": None},
     "ppo": {"success_rate": 0.706, "mean_steps": 362, "mean_reward": -0.35},
+    "mappo": {"success_rate": None, "mean_steps": None, "mean_reward": None},
     "ddpg": {"success_rate": 0.568, "mean_steps": 412, "mean_reward": -0.42},
     "maddpg": {"success_rate": 0.966, "mean_steps": 208, "mean_reward": -0.28},
     "bicnet": {"success_rate": 0.906, "mean_steps": 265, "mean_reward": -0.33},
@@ -26,7 +30,8 @@ TABLE4: dict[str, dict[str, float | None]] = {
     "cbc": {"success_rate": None, "mean_steps": None, "mean_reward": None},
     "cbc-tp": {"success_rate": 0.988, "mean_steps": 132, "mean_reward": -0.21},
 }
-"""Table IV: 1000 episodes with disturbance against the DDPG evader (CBC Net is not in it)."""
+"""Table IV: 1000 episodes with disturbance against the DDPG evader (CBC Net and MAPPO are not
+in it)."""
 
 TABLE5 = {
     "fde": (0.026, 0.038, 0.062, 0.118, 0.196),

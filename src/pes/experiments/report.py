@@ -106,7 +106,9 @@ def _task(meta: dict) -> str:
     """A sentence naming the EnvConfig keys that changed every method's task (training and
     evaluation alike: ``--scenario k=v``), else ``""``."""
     pairs = meta.get("scenario") or {}
-    text = [f"`--scenario {k}={v if isinstance(v, str) else json.dumps(v)}`" for k, v in pairs.items()]
+    text = [
+        f"`--scenario {k}={v if isinstance(v, str) else json.dumps(v)}`" for k, v in pairs.items()
+    ]
     return "Every method's task, trained and evaluated: " + " ".join(text) + ". " if text else ""
 
 

@@ -1,0 +1,66 @@
+"""MAPPO (Yu et al., 2022, "The Surprising Effectiveness of PPO in Cooperative Multi-Agent
+Games"): PPO with one actor shared by the pursuers on each one's own observation and a
+centralised value V(o_i, s) on its observation and the global state (the evader's velocity
+included), the agent-specific global state of that paper. It is :class:`pes.algos.ppo.PPO` with
+``central_value=True`` and the settings of Yu et al.'s continuous-control experiments:
+standardised value targets (ValueNorm), a Huber value loss, standardised inputs, annealed
+learning rates, an entropy bonus of 0.01, many environments per rollout and few, large
+minibatches. docs/algorithms/mappo.md lists every setting beside that paper's and CleanRL's.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from pes.algos.ppo import PPO, STANDARD, PPOConfig
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+
+MAPPO_DEFAULTS: dict[str, Any] = dict(
+    central_value=True,
+    shared=True,
+    gamma=0.99,
+    lr_actor=5e-4,
+    lr_critic=5e-4,
+    hidden=64,
+    ent_coef=0.01,
+    grad_clip=10.0,
+    huber_delta=10.0,
+    ppo_epochs=10,
+)
+"""Yu et al.'s settings (their Table of common hyper-parameters for MPE and MuJoCo-style
+tasks), on top of :class:`PPOConfig`'s defaults, in every preset."""
+
+MAPPO_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(MAPPO_DEFAULTS, episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
+    # 256 environments x 32 steps = 8,192 transitions (40,960 pursuer samples) per rollout,
+    # 4 minibatches of 2,048 transitions, 10 epochs: 244 updates in the quick budget
+    "quick": dict(QUICK_RUN, num_envs=256, rollout_steps=32, batch_size=2048)
+    | MAPPO_DEFAULTS
+    | STANDARD,
+    "tiny": dict(
+        TINY_RUN,
+        **MAPPO_DEFAULTS | dict(hidden=32, ppo_epochs=4),
+        rollout_steps=16,
+        batch_size=32,
+        bc_epochs=2,
+        protocol=TINY_PROTOCOL,
+    )
+    | STANDARD,
+}
+
+
+class MAPPO(PPO):
+    """The MAPPO learner: :class:`PPO` with a centralised value and Yu et al.'s settings."""
+
+    name = "mappo"
+    Config = PPOConfig
+    PRESETS = MAPPO_PRESETS
+    TUNE_SPACE: ClassVar[dict[str, tuple]] = {
+        "lr_actor": ("log", 1e-4, 1e-3),
+        "lr_critic": ("log", 1e-4, 1e-3),
+        "ent_coef": ("choice", [0.0, 1e-3, 1e-2]),
+        "gamma": ("choice", [0.95, 0.98, 0.99]),
+        "rollout_steps": ("choice", [16, 32, 64]),
+        "ppo_epochs": ("choice", [5, 10, 15]),
+        "batch_size": ("choice", [1024, 2048, 8192]),
+    }
