@@ -3,14 +3,17 @@
     python benchmarks/bench_train.py                 # CPU: benchmarks/results/train_cpu.json
     python benchmarks/bench_train.py --device cuda --out benchmarks/results/train_cuda.json
 
-For each algorithm and preset it measures, after a warm-up that fills the replay buffer:
+For each algorithm (default: every learner) and preset (default: quick) it measures, after a
+warm-up that fills the replay buffer (or one rollout):
 
-* ``collect_env_steps_per_s``: acting (TP Net + actor on every pursuer, OU noise), the fused
+* ``collect_env_steps_per_s``: acting (TP Net + actor on every pursuer, exploration), the
   simulator step and storing the transitions, with no gradient updates;
-* ``update_ms``: one gradient update, and its parts (``tp_update_ms``, TP Net's supervised step;
-  the rest is the critic, the actor and the soft target updates);
-* ``train_env_steps_per_s``: what a run achieves with the preset's ``update_every``
-  (one update per that many transitions): 1 / (1 / collect + update_s / update_every);
+* ``update_ms``: one update (a replay learner's gradient step of every network; an on-policy
+  learner's epochs over a whole rollout), and its part ``tp_update_ms``, TP Net's supervised
+  step;
+* ``train_env_steps_per_s``: what a run achieves at the preset's update ratio
+  (``updates_per_env_step``: 1 / ``update_every`` for the replay learners, 1 / the rollout's
+  transitions for the on-policy ones): 1 / (1 / collect + updates_per_env_step * update_s);
 * ``bytes_per_transition`` of the replay buffer and what 1e6 transitions take;
 * ``update_time_by_op``: the share of an update's time taken by its five costliest operators.
 """
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections import Counter
 from pathlib import Path
 
 import torch
@@ -33,27 +37,44 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
     # The learner's own acting and updates: without this, the quick preset's PID(PF)
     # demonstrations (its first 100,000 transitions) would play through the timed window.
     cfg = build_train_config(algo, preset, {"device": device, "protocol.demonstrations": None})
-    env_cfg = ALGOS[algo].adapt_env(cfg.env_config())
+    cls = ALGOS[algo]
+    env_cfg = cls.adapt_env(cfg.env_config())
     torch.manual_seed(0)
-    learner = ALGOS[algo](cfg, env_cfg, torch.device(device))
+    learner = cls(cfg, env_cfg, torch.device(device))
     env = make_env(env_cfg, num_envs=cfg.num_envs, device=device, seed=0, compile=True)
     gen = torch.Generator().manual_seed(0)
     obs, info = env.reset()
     sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+    lc = cfg.learner
+
+    def step() -> None:
+        nonlocal obs, info
+        actions, evader = learner.act(obs, info, 0.2, gen)
+        obs2, reward, terminated, truncated, info2 = env.step(actions, evader)
+        learner.record(info, actions, evader, reward, terminated, info2)
+        obs, info = obs2, info2
 
     def collect(steps: int) -> None:
-        nonlocal obs, info
+        """``steps`` vector steps; an on-policy rollout that fills is dropped, not learnt."""
         for _ in range(steps):
-            actions, evader = learner.act(obs, info, 0.2, gen)
-            obs2, reward, terminated, truncated, info2 = env.step(actions, evader)
-            learner.record(info, actions, evader, reward, terminated, info2)
-            obs, info = obs2, info2
+            step()
+            if cls.on_policy and learner.ready():
+                learner.buffer.clear()
 
-    lc = cfg.learner
-    need = max(lc.warmup, lc.batch_size, getattr(lc, "tp_batch_size", 0)) // cfg.num_envs + 20
+    def fill() -> None:
+        """An on-policy learner's next rollout (a replay learner's buffer stays filled)."""
+        while cls.on_policy and not learner.ready():
+            step()
+
+    if cls.on_policy:
+        updates_per_step = 1.0 / lc.rollout_steps
+        need = lc.rollout_steps
+    else:
+        updates_per_step = learner.update_credit()
+        need = max(lc.warmup, lc.batch_size, getattr(lc, "tp_batch_size", 0)) // cfg.num_envs
     # Fill the buffer past the warm-up and play past the first episode end, so that the step
     # and the auto-reset pass are both compiled before the timed window.
-    collect(max(need, env_cfg.max_steps + 5))
+    collect(max(need + 20, env_cfg.max_steps + 5))
     sync()
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
@@ -63,33 +84,38 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
     collect_rate = steps * cfg.num_envs / (time.perf_counter() - start)
 
     for _ in range(3):
+        fill()
         learner.update(gen)
-    updates, tp_time, start = 0, 0.0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
+    updates, busy, tp_time = 0, 0.0, 0.0
+    while busy < seconds:
+        fill()
         if hasattr(learner, "tp"):
             t0 = time.perf_counter()
             learner.auxiliary_update(gen)
             sync()
             tp_time += time.perf_counter() - t0
+        t0 = time.perf_counter()
         learner.update(gen)
+        sync()
+        busy += time.perf_counter() - t0
         updates += 1
-    sync()
-    total = time.perf_counter() - start
-    profile = profile_update(learner, gen, device)
-    # update() includes one TP step: subtract the extra one timed separately
-    update_s = (total - tp_time) / updates
+    profile = profile_update(learner, gen, device, fill)
+    update_s = busy / updates  # update() includes its one TP step
     tp_s = tp_time / updates
-    train_rate = 1.0 / (1.0 / collect_rate + update_s / lc.update_every)
-    per = learner.buffer.bytes_per_transition
+    # a vector step's time in training: collecting it, and its share of an update
+    train_rate = cfg.num_envs / (cfg.num_envs / collect_rate + updates_per_step * update_s)
+    per = getattr(learner.buffer, "bytes_per_transition", None)
     return {
         "algo": algo,
         "preset": preset,
         "device": device,
         "num_envs": cfg.num_envs,
         "num_pursuers": env_cfg.num_pursuers,
-        "hidden": lc.hidden,
+        "hidden": getattr(lc, "hidden", None),
         "batch_size": lc.batch_size,
-        "update_every": lc.update_every,
+        "update_every": getattr(lc, "update_every", None),
+        "rollout_steps": getattr(lc, "rollout_steps", None),
+        "updates_per_env_step": round(updates_per_step / cfg.num_envs, 6),
         "env_compiled": env.compiled,
         "collect_env_steps_per_s": round(collect_rate, 1),
         "update_ms": round(update_s * 1000, 2),
@@ -98,32 +124,37 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
         "train_env_steps_per_s": round(train_rate, 1),
         "update_share_of_time": round(1 - train_rate / collect_rate, 3),
         "bytes_per_transition": per,
-        "buffer_gb_at_1e6": round(per * 1e6 / 1e9, 3),
+        "buffer_gb_at_1e6": round(per * 1e6 / 1e9, 3) if per else None,
         "update_time_by_op": profile,
     }
 
 
-def profile_update(learner, gen: torch.Generator, device: str, updates: int = 10) -> dict:
+def profile_update(learner, gen: torch.Generator, device: str, fill, updates: int = 10) -> dict:
     """Where an update's time goes: the share of the self time of the five costliest operator
-    kinds over ``updates`` updates (torch.profiler), summed forward and backward."""
+    kinds over ``updates`` updates (torch.profiler), summed forward and backward; ``fill()``
+    collects what each update needs, outside the profile."""
     from torch.profiler import ProfilerActivity, profile
 
     activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device == "cuda" else [])
-    with profile(activities=activities) as prof:
-        for _ in range(updates):
-            learner.update(gen)
     key = "self_device_time_total" if device == "cuda" else "self_cpu_time_total"
-    events = [e for e in prof.key_averages() if getattr(e, key, 0) > 0]
-    total = sum(getattr(e, key) for e in events)
-    top = sorted(events, key=lambda e: getattr(e, key), reverse=True)[:5]
-    return {e.key: round(getattr(e, key) / total, 3) for e in top}
+    totals: Counter[str] = Counter()
+    for _ in range(updates):
+        fill()
+        with profile(activities=activities) as prof:
+            learner.update(gen)
+        for e in prof.key_averages():
+            totals[e.key] += getattr(e, key, 0)
+    total = sum(totals.values())
+    return {k: round(v / total, 3) for k, v in totals.most_common(5)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu")
-    parser.add_argument("--algos", nargs="+", default=["cbc-tp", "cbc", "evader-ddpg"])
-    parser.add_argument("--presets", nargs="+", default=["quick", "paper"])
+    parser.add_argument("--algos", nargs="+", default=list(ALGOS), choices=list(ALGOS))
+    parser.add_argument(
+        "--presets", nargs="+", default=["quick"], choices=["quick", "paper", "tiny"]
+    )
     parser.add_argument("--seconds", type=float, default=10.0, help="per measurement")
     parser.add_argument("--threads", type=int, default=0)
     parser.add_argument("--out", default=None)
