@@ -381,7 +381,7 @@ def test_tune_halves_the_trials_resumes_and_refuses_other_settings(tmp_path, mon
         trained = json.loads((folder / "run" / "summary.json").read_text())["env_steps"]
         assert steps <= trained < steps + 8  # stopped within one step of 8 environments
     values = {r["id"]: r["values"] for r in summary["results"]}
-    space = {"lr_actor", "lr_critic", "ent_coef", "hidden"}
+    space = set(pes.algos.learner_class("ppo").TUNE_SPACE)
     assert set(values["t00"]) == set(values["t01"]) == space
     preset = pes.algos.build_train_config("ppo", "tiny", {}, protocol="pes").learner
     assert values["t00"] == {key: getattr(preset, key) for key in space}

@@ -55,6 +55,16 @@ def _add_scenario_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_ray_timeout(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--ray-timeout",
+        type=_positive_float,
+        default=30.0,
+        metavar="S",
+        help="seconds to wait for the cluster at --ray-address to answer (default: 30)",
+    )
+
+
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The ``--set KEY=VALUE`` options as a mapping (the values read as YAML), in order."""
     return dict(parse_override(text) for text in args.overrides)
@@ -77,6 +87,16 @@ def _say(args: argparse.Namespace, text: str) -> None:
     """Human-readable output, silenced by --json."""
     if not getattr(args, "json", False):
         print(text)
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
 
 
 def _positive(text: str) -> int:
@@ -450,6 +470,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         out=out,
         methods=args.methods,
         ray_address=args.ray_address,
+        ray_timeout=args.ray_timeout,
         use_ray=False if args.no_ray else None,
         progress=not args.json,
         command=recorded_command(["pes", *sys.argv[1:]]) if sys.argv[1:2] == ["reproduce"] else "",
@@ -494,6 +515,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         out=out,
         use_ray=False if args.no_ray else None,
         ray_address=args.ray_address,
+        ray_timeout=args.ray_timeout,
         parallel=args.parallel,
         progress=not args.json,
         # The command that runs the trials (a --report-only run names it, not itself).
@@ -766,6 +788,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the trials on this Ray cluster (its nodes must see --out); default: a local "
         "Ray instance",
     )
+    _add_ray_timeout(p)
     p.add_argument("--no-ray", action="store_true", help="run the trials here, one at a time")
     p.add_argument(
         "--parallel",
@@ -851,6 +874,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=_non_negative, default=0, help="training and search seed")
     p.add_argument("--ray-address", default=None, metavar="A", help="a Ray cluster to use")
+    _add_ray_timeout(p)
     p.add_argument("--no-ray", action="store_true", help="run the trials here, one at a time")
     p.add_argument(
         "--parallel",

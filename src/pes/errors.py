@@ -30,3 +30,13 @@ class TrainingInterruptedError(PESError):
 class TrialsFailedError(PESError):
     """Trials of a sweep (``pes reproduce``, ``pes tune``) that Ray reported as failed; their
     tracebacks are in Ray's trial folders, and rerunning the command resumes them."""
+
+
+class FolderInUseError(PESError):
+    """An output folder that another running ``pes train``, ``pes tune`` or ``pes reproduce``
+    holds (:mod:`pes.lock`): one writer per folder."""
+
+
+class ClusterError(PESError):
+    """A Ray cluster that cannot be joined (nothing answering at its address, a refused
+    authentication) or that lacks the resources a trial needs."""

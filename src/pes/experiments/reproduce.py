@@ -24,9 +24,16 @@ from pes.algos import ALGOS
 from pes.errors import ConfigError
 from pes.experiments.paper import METHODS
 from pes.experiments.report import write_report
-from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
+from pes.experiments.sweep import (
+    RAY_TIMEOUT,
+    SweepProgress,
+    choose_runner,
+    run_ray,
+    run_sequential,
+)
 from pes.experiments.trials import BUDGETS, make_trials, run_trial, train_config
 from pes.learn.protocol import PROTOCOLS
+from pes.lock import check_free, folder_lock
 from pes.sim.config import EnvConfig
 
 TARGETS = ("table4", "table5", "table6", "figures", "all")
@@ -116,12 +123,14 @@ def reproduce(
     outside: str | Path | None = None,
     overrides: dict[str, Any] | None = None,
     scenario: dict[str, Any] | None = None,
+    ray_timeout: float = RAY_TIMEOUT,
 ) -> dict[str, Any]:
     """Run the trials of ``target`` and write its report into ``out``; returns a summary.
 
     ``protocol``: the training protocol of every learner (:mod:`pes.learn.protocol`; default
     ``paper`` under the paper budget, ``pes`` otherwise).
     ``use_ray``: None uses Ray when it is installed; False runs the trials in this process.
+    ``ray_timeout``: seconds to wait for the cluster at ``ray_address`` to answer.
     ``parallel``: at most this many trials at once under Ray (0: one per CPU).
     ``report_only``: run nothing; write the report of the trials finished so far.
     ``outside``: a folder of outside reference runs (``python -m pes.benchmarl.reference``, one
@@ -155,11 +164,13 @@ def reproduce(
     finished = len(specs) - len(todo)
     if report_only:
         todo = []
+    folders = [out / "trials" / s["id"] for s in todo]
+    check_free(folders + [f / "run" for f in folders], "pes reproduce")
     start = time.time()
     view = SweepProgress(len(specs), finished, progress and bool(todo), "reproduce")
     try:
         if todo and use_ray:
-            run_ray(todo, out, ray_address, view, run_trial, parallel, "reproduce")
+            run_ray(todo, out, ray_address, view, run_trial, parallel, "reproduce", ray_timeout)
         elif todo:
             run_sequential(todo, out, view, run_trial)
     finally:
@@ -171,19 +182,20 @@ def reproduce(
     everything = trials_for(
         target, [m for m in METHODS if m in wanted], seeds, budget, protocol, overrides, scenario
     )
-    report = write_report(
-        out,
-        everything,
-        target,
-        budget,
-        seeds,
-        command,
-        seconds,
-        protocol,
-        outside,
-        overrides,
-        scenario,
-    )
+    with folder_lock(out, "pes reproduce", wait=True):  # one report writer at a time
+        report = write_report(
+            out,
+            everything,
+            target,
+            budget,
+            seeds,
+            command,
+            seconds,
+            protocol,
+            outside,
+            overrides,
+            scenario,
+        )
     return {
         "target": target,
         "budget": budget,

@@ -39,6 +39,7 @@ from pes.experiments.budgets import (
     write_json,
 )
 from pes.experiments.tpnet import run_tpnet
+from pes.lock import folder_lock
 from pes.policies import PIDPotentialField
 
 __all__ = ["BUDGETS", "DAMAGED", "EVAL_SEED", "eval_config", "make_trials", "run_trial"]
@@ -107,7 +108,14 @@ def run_trial(spec: dict, out: Path, threads: int = 0, progress: bool = False) -
     done = folder / "done.json"
     if done.is_file():
         return json.loads(done.read_text())
-    folder.mkdir(parents=True, exist_ok=True)
+    with folder_lock(folder, "pes reproduce"):  # a second attempt fails at once
+        return _run_trial(spec, folder, threads, progress)
+
+
+def _run_trial(spec: dict, folder: Path, threads: int, progress: bool) -> dict[str, Any]:
+    done = folder / "done.json"
+    if done.is_file():  # finished while this attempt waited to start
+        return json.loads(done.read_text())
     if not (folder / "spec.json").is_file():  # what a resumed run must match (check_trials)
         write_json(folder / "spec.json", spec)
     if threads:

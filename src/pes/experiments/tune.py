@@ -47,7 +47,14 @@ from pes.errors import ConfigError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, eval_config, write_json
 from pes.experiments.report import read_progress, trained_on
-from pes.experiments.sweep import SweepProgress, choose_runner, run_ray, run_sequential
+from pes.experiments.sweep import (
+    RAY_TIMEOUT,
+    SweepProgress,
+    choose_runner,
+    run_ray,
+    run_sequential,
+)
+from pes.lock import check_free, folder_lock
 
 TUNE_EVAL_SEED = 3_000_000
 """First seed of the held-out evaluation episodes of every trial."""
@@ -205,7 +212,16 @@ def run_tune_trial(
     if record is not None:
         return record
     folder = Path(out) / "trials" / spec["id"]
-    folder.mkdir(parents=True, exist_ok=True)
+    with folder_lock(folder, "pes tune"):  # a second attempt fails at once
+        return _run_tune_trial(spec, env_steps, out, folder, threads, progress)
+
+
+def _run_tune_trial(
+    spec: dict, env_steps: int, out: Path, folder: Path, threads: int, progress: bool
+) -> dict[str, Any]:
+    record = finished(out, spec, env_steps)
+    if record is not None:  # finished while this attempt waited to start
+        return record
     if not (folder / "spec.json").is_file():
         write_json(folder / "spec.json", spec)
     values = {
@@ -309,12 +325,14 @@ def tune(
     command: str = "",
     preset: str = "quick",
     report_only: bool = False,
+    ray_timeout: float = RAY_TIMEOUT,
 ) -> dict[str, Any]:
     """Run (or finish) the search of ``algo`` into ``out`` and write its report; returns a
     summary with every scored trial, best first. ``env_steps`` is the budget of the trials that
     go furthest (0: the preset's ``env_steps``), ``halvings`` the rounds of successive halving
     before them; ``preset`` is what each trial trains (``quick``; ``tiny`` for tests);
-    ``report_only`` runs no trial and reports the scored ones."""
+    ``report_only`` runs no trial and reports the scored ones; ``ray_timeout``: seconds to wait
+    for the cluster at ``ray_address`` to answer."""
     if algo not in ALGOS:
         raise ConfigError(f"algo must be one of {', '.join(ALGOS)}, got '{algo}'")
     env_steps = env_steps or preset_env_steps(algo, preset, protocol)
@@ -328,16 +346,21 @@ def tune(
     start = time.time()
     while not report_only and (round_ := pending(rounds(out, specs))) is not None:
         budget, todo = round_[0], resumable_first(out, round_[1])
+        folders = [out / "trials" / s["id"] for s in todo]
+        check_free(folders + [run_folder(out, s) for s in todo], "pes tune")
         view = SweepProgress(len(todo), 0, progress, f"tune {budget:,} env steps")
         batch = [{**s, "env_steps": budget} for s in todo]
         try:
             if use_ray:
-                run_ray(batch, out, ray_address, view, run_tune_trial, parallel, "tune")
+                run_ray(
+                    batch, out, ray_address, view, run_tune_trial, parallel, "tune", ray_timeout
+                )
             else:
                 run_sequential(batch, out, view, run_tune_trial)
         finally:
             view.close()
-    return write_tuning_report(out, specs, command, time.time() - start)
+    with folder_lock(out, "pes tune", wait=True):  # one report writer at a time
+        return write_tuning_report(out, specs, command, time.time() - start)
 
 
 def copy_run_log(folder: Path) -> None:

@@ -60,6 +60,7 @@ from pes.learn.checkpoint import (
 )
 from pes.learn.config import TrainConfig
 from pes.learn.learner import Learner
+from pes.lock import folder_lock
 from pes.sim.bench import machine_info
 from pes.sim.env import make_env, resolve_device
 
@@ -216,9 +217,16 @@ def train(
     resume: bool = False,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Train ``learner_cls`` (the method ``cfg.algo``) into the folder ``out``; returns a
-    summary (and writes it to ``out/summary.json``)."""
-    out = Path(out)
+    """Train ``learner_cls`` (the method ``cfg.algo``) into the folder ``out``, holding its lock
+    (:mod:`pes.lock`: a second writer fails at once); returns a summary (and writes it to
+    ``out/summary.json``)."""
+    with folder_lock(out, "pes train"):
+        return _train(cfg, Path(out), learner_cls, resume, progress)
+
+
+def _train(
+    cfg: TrainConfig, out: Path, learner_cls: type[Learner], resume: bool, progress: bool
+) -> dict[str, Any]:
     ckpt_path = out / "checkpoint.pt"
     if resume and not ckpt_path.is_file():
         raise CheckpointError(f"nothing to resume: no checkpoint at '{ckpt_path}'")
