@@ -2,10 +2,11 @@
 Games"): PPO with one actor shared by the pursuers on each one's own observation and a
 centralised value V(o_i, s) on its observation and the global state (the evader's velocity
 included), the agent-specific global state of that paper. It is :class:`pes.algos.ppo.PPO` with
-``central_value=True`` and the settings of Yu et al.'s continuous-control experiments:
-standardised value targets (ValueNorm), a Huber value loss, standardised inputs, annealed
-learning rates, many environments per rollout and few, large minibatches; its entropy bonus
-is CleanRL's continuous-control 0, not the 0.01 of Yu et al.'s discrete-action benchmarks. docs/algorithms/mappo.md lists every setting beside that paper's and CleanRL's.
+``central_value=True`` and that paper's settings: standardised value targets (ValueNorm), a
+Huber value loss, standardised inputs, annealed learning rates, many environments per rollout
+and few, large minibatches; its entropy bonus is CleanRL's continuous-control 0, not the 0.01
+of Yu et al.'s discrete-action benchmarks. docs/algorithms/mappo.md lists every setting beside
+that paper's and CleanRL's.
 """
 
 from __future__ import annotations

@@ -198,6 +198,18 @@ def table4(
     ]
     lines.append("| training env steps (PES) | " + " | ".join(steps) + " |")
     lines.append("| training CPU minutes (PES) | " + " | ".join(minutes) + " |")
+    # Evaluations disable a crashed pursuer; a crash curriculum that never switched trained the
+    # learner under the other rule all run.
+    ruled = [
+        f"{sum(bool(c.get('crashes_disable')) for c in costs[col])} of {len(costs[col])}"
+        if costs[col] and all("crashes_disable" in c for c in costs[col])
+        else "—"
+        for col in columns
+    ]
+    if any(r != "—" for r in ruled):
+        lines.append(
+            "| trained to crashes that disable, as evaluated (seeds) | " + " | ".join(ruled) + " |"
+        )
     lines += [
         "",
         "Seeds per method: " + ", ".join(f"{c} {len(e)}" for c, e in columns.items()) + ".",
@@ -472,6 +484,13 @@ def write_report(
     ``overrides``: the ``--set`` keys every learner's training changed (named in the tables).
     ``scenario``: the EnvConfig keys that changed every method's task (named in the tables)."""
     done = _load(out, specs)
+    for spec in specs:  # the crash rule each training ended under, from its last log row
+        train = (done.get(spec["id"]) or {}).get("train")
+        log = out / "trials" / spec["id"] / "run" / "progress.csv"
+        if train and "crashes_disable" not in train and log.is_file():
+            rows = read_progress(log)
+            if len(rows) and "crashes_disable" in (rows.dtype.names or ()):
+                train["crashes_disable"] = bool(rows["crashes_disable"][-1] == 1)
     references = load_outside(outside)
     machine = machine_info()
     trains = [rec["train"] for rec in done.values() if rec.get("train")]  # the learner trials

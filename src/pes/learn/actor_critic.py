@@ -98,6 +98,8 @@ class ActorCritic(Learner):
         "lr_actor": ("log", 1e-4, 2e-3),
         "lr_critic": ("log", 3e-4, 3e-3),
         "batch_size": ("choice", [128, 256, 512]),
+        "update_every": ("choice", [16, 32, 64]),
+        "gamma": ("choice", [0.95, 0.98, 0.99]),
     }
 
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:

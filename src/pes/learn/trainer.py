@@ -323,6 +323,7 @@ def _train(
             "torch": str(torch.__version__),
             "torch_threads": torch.get_num_threads(),  # at the end of the run (or this part)
             "cpus": list(prog.cpus),
+            "crashes_disable": prog.crashes_disable,  # the crash rule it ended under
         }
 
     def save_policy(path: Path, info: dict[str, Any]) -> dict[str, Any]:
