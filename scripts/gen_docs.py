@@ -79,6 +79,7 @@ ALGO_PAGES = {
     "ddpg": "ddpg",
     "bicnet": "bicnet",
     "ppo": "ppo",
+    "mappo": "mappo",
     "maac": "maac",
     "evader-ddpg": "evader_ddpg",
 }
