@@ -69,6 +69,7 @@ LOG_COLUMNS = (
     "env_steps",
     "updates",
     "wall_s",
+    "cpu_s",
     "success_rate",
     "avg_reward",
     "episode_steps",
@@ -91,7 +92,8 @@ LOG_COLUMNS = (
     "demonstrating",
     "bc_share",
 )
-"""Columns of ``progress.csv``; ``avg_reward`` is each episode's total (team-mean) training
+"""Columns of ``progress.csv``; ``wall_s`` and ``cpu_s`` are the run's wall and process CPU
+seconds so far (CPU: every thread's); ``avg_reward`` is each episode's total (team-mean) training
 reward divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
 evader's speed cap (m/s) during the row's episodes; ``crashes_disable`` 1 when they were played
 with crashes that disable (the protocol's crash curriculum); ``demonstrating`` 1 when the
@@ -484,6 +486,7 @@ def _train(
                         "env_steps": prog.env_steps,
                         "updates": prog.updates,
                         "wall_s": round(prog.wall_s, 1),
+                        "cpu_s": round(prog.cpu_s, 1),
                         "success_rate": sum(window["success"]) / len(window["success"]),
                         "avg_reward": sum(window["reward"]) / len(window["reward"]),
                         "episode_steps": sum(window["steps"]) / len(window["steps"]),
