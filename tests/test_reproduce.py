@@ -9,12 +9,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from PIL import Image
 
 import pes
 from pes.cli import main
+from pes.errors import ConfigError
 from pes.experiments.reproduce import reproduce
-from pes.experiments.trials import BUDGETS, make_trials, train_config
+from pes.experiments.trials import BUDGETS, eval_config, make_trials, train_config
 from pes.sim.bench import machine_info
 
 METHODS = ["pid-pf", "cbc", "cbc-tp"]
@@ -54,6 +56,7 @@ def test_all_targets_sequential(sweep):
         "fig7_average_reward.png",
         "fig8_episode_steps.png",
         "fig9_10_cbc_tp_vs_cbc.png",
+        "learning_curves.png",
     ]
     assert all(_not_blank(out / "figures" / name) for name in figures)
     captions = (out / "figures.md").read_text()
@@ -577,3 +580,26 @@ def test_the_recorded_commit_is_dirty_only_when_the_source_differs(tmp_path):
     assert source_commit(package) == head.strip()
     (package / "step.py").write_text("x = 2\n")
     assert source_commit(package) == head.strip() + "-dirty"
+
+
+def test_a_scenario_changes_every_method_s_task_in_training_and_evaluation(tmp_path):
+    """``--scenario`` (the positive control's slower evader) reaches PID(PF)'s evaluation, the
+    learner's training and its evaluation, is named by the report, and a folder keeps one."""
+    slow = {"evader_max_speed": 8.0}
+    reproduce("table4", budget="tiny", seeds=1, methods=["pid-pf", "maddpg"], out=tmp_path,
+              use_ray=False, progress=False, scenario=slow)  # fmt: skip
+    trained = yaml.safe_load(
+        (tmp_path / "trials" / "maddpg-s0" / "run" / "config.yaml").read_text()
+    )
+    assert trained["env"]["evader_max_speed"] == 8.0
+    for trial in ("pid-pf-s0", "maddpg-s0"):
+        done = json.loads((tmp_path / "trials" / trial / "done.json").read_text())
+        assert done["spec"]["scenario"] == slow
+    assert eval_config(BUDGETS["tiny"], 0, slow).evader_max_speed == 8.0
+    assert "`--scenario evader_max_speed=8.0`" in (tmp_path / "table4.md").read_text()
+    with pytest.raises(ConfigError, match="other settings"):
+        reproduce("table4", budget="tiny", seeds=1, methods=["pid-pf"], out=tmp_path,
+                  use_ray=False, progress=False)  # fmt: skip
+    with pytest.raises(ConfigError, match="evader_max_sped"):
+        reproduce("table4", budget="tiny", seeds=1, methods=["pid-pf"], out=tmp_path / "x",
+                  use_ray=False, progress=False, scenario={"evader_max_sped": 8})  # fmt: skip

@@ -312,9 +312,20 @@ def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarr
     return curves
 
 
-def _band(ax, runs: list[np.ndarray], key: str, label: str, scale: float = 1.0) -> None:
-    grid = np.unique(np.concatenate([r["episodes"] for r in runs]))
-    ys = np.stack([np.interp(grid, r["episodes"], r[key] * scale) for r in runs])
+def _band(
+    ax,
+    runs: list[np.ndarray],
+    key: str,
+    label: str,
+    scale: float = 1.0,
+    x: str = "episodes",
+    x_scale: float = 1.0,
+) -> None:
+    """Mean ± std over ``runs`` of ``key`` × ``scale`` against the log column ``x`` ×
+    ``x_scale`` (each run interpolated onto every run's x values, within its own range)."""
+    grid = np.unique(np.concatenate([r[x] * x_scale for r in runs]))
+    grid = grid[grid <= min(float(r[x][-1]) * x_scale for r in runs)]
+    ys = np.stack([np.interp(grid, r[x] * x_scale, r[key] * scale) for r in runs])
     mean = ys.mean(0)
     (line,) = ax.plot(grid, mean, label=f"{label} ({len(runs)} seeds)")
     if len(runs) > 1:
@@ -362,6 +373,8 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
         plt.close(fig)
         made.append((name, f"{paper_fig}: {ylabel} of every learned method over {training}."))
 
+    if curves:
+        made.append(_experience_and_compute(curves, folder, plt, training))
     if "cbc" in curves and "cbc-tp" in curves:
         fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
         for ax, (key, ylabel, scale) in zip(
@@ -385,6 +398,33 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
         )
     made += _trajectory_figures(out, specs, done, meta, folder, plt)
     return made
+
+
+def _experience_and_compute(curves: dict, folder: Path, plt, training: str) -> tuple[str, str]:
+    """Every learner's training success against env steps and against CPU minutes (runs that
+    logged ``cpu_s``), side by side: the comparison at equal experience and at equal compute."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    panels = (("env_steps", 1e-6, "env steps (millions)"), ("cpu_s", 1 / 60, "CPU minutes"))
+    for ax, (x, x_scale, xlabel) in zip(axes, panels):
+        for method in LABELS:
+            runs = [r for r in curves.get(method, []) if x in (r.dtype.names or ())]
+            if runs:
+                _band(ax, runs, "success_rate", LABELS[method], 100.0, x, x_scale)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("success rate (%)")
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    fig.tight_layout()
+    name = "learning_curves.png"
+    fig.savefig(folder / name, dpi=120)
+    plt.close(fig)
+    caption = (
+        "Success rate of every learned method against the env steps it trained on (equal "
+        "experience) and against the CPU minutes its process used (equal compute; runs that "
+        f"logged them), over {training}."
+    )
+    return name, caption
 
 
 def _seed0(specs: list[dict], done: dict, algo: str) -> Path | None:
