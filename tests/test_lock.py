@@ -1,6 +1,7 @@
 """One writer per output folder (pes.lock): a second ``pes train``, ``pes reproduce`` or
 ``pes tune`` into a folder in use fails at once with one line naming the holder and changes
-nothing there; a folder whose holder died is taken over with a line saying so."""
+nothing there; a folder whose holder died is taken over with a line saying so. And a Ray
+address where nothing answers is one line too (the real cluster: tests/test_cluster.py)."""
 
 from __future__ import annotations
 
@@ -110,3 +111,13 @@ def test_a_sweep_whose_trial_is_in_use_fails_before_running_anything(tmp_path, c
         assert main(tune) != 0
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "t00' is in use by pid" in err
+
+
+def test_an_unreachable_cluster_is_one_line_within_the_timeout(tmp_path, capsys):
+    """Nothing listens on port 1: one line naming the address, at once (Ray alone would retry
+    for minutes)."""
+    argv = ["reproduce", "table6", "--budget", "tiny", "--seeds", "1", "--ray-address",
+            "127.0.0.1:1", "--ray-timeout", "5", "--json", "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: cannot reach a Ray cluster at 127.0.0.1:1")
