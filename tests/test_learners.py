@@ -514,7 +514,7 @@ def test_the_evader_trains_against_pid_pf_on_its_own_map():
 def _untimed_rows(path) -> list[dict]:
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
-    timing = {"wall_s", "env_steps_per_s", "updates_per_s"}
+    timing = {"wall_s", "cpu_s", "env_steps_per_s", "updates_per_s"}
     return [{k: v for k, v in row.items() if k not in timing} for row in rows]
 
 

@@ -547,15 +547,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
 # --- the parser ------------------------------------------------------------------------------
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(
-        prog="pes",
-        description="PES: multi-quadcopter pursuit-evasion (Game of Drones, TNNLS 2022).",
-    )
-    parser.add_argument("--version", action="version", version=f"pes {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
-    sub.required = True
-
+def _add_demo(sub) -> None:
+    """The parser of ``pes demo``."""
     p = sub.add_parser(
         "demo",
         help="one episode of the best shipped policy: GIF + record",
@@ -574,6 +567,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_options(p)
     p.set_defaults(func=cmd_demo)
 
+
+def _add_eval(sub) -> None:
+    """The parser of ``pes eval``."""
     p = sub.add_parser(
         "eval",
         help="evaluate a policy over many episodes",
@@ -602,6 +598,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_options(p)
     p.set_defaults(func=cmd_eval)
 
+
+def _add_render(sub) -> None:
+    """The parser of ``pes render``."""
     p = sub.add_parser(
         "render",
         help="record episodes as GIF, MP4, PNG plot or JSON",
@@ -639,6 +638,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_options(p)
     p.set_defaults(func=cmd_render)
 
+
+def _add_view(sub) -> None:
+    """The parser of ``pes view``."""
     p = sub.add_parser(
         "view",
         help="the interactive 3-D replay of an episode record (an HTML page)",
@@ -652,7 +654,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_view)
 
-    from pes.algos import ALGOS
+
+def _add_train(sub) -> None:
+    """The parser of ``pes train``."""
+    from pes.algos import ALGOS  # noqa: PLC0415 - loads every learner
 
     p = sub.add_parser(
         "train",
@@ -693,6 +698,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object at the end")
     p.set_defaults(func=cmd_train)
 
+
+def _add_bench(sub) -> None:
+    """The parser of ``pes bench``."""
     p = sub.add_parser(
         "bench",
         help="simulator throughput in env-steps/s",
@@ -720,6 +728,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_options(p)
     p.set_defaults(func=cmd_bench)
 
+
+def _add_export_onnx(sub) -> None:
+    """The parser of ``pes export-onnx``."""
     p = sub.add_parser(
         "export-onnx",
         help="a CBC-TP / CBC policy (actor + TP Net) as one ONNX graph",
@@ -749,6 +760,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_export_onnx)
 
+
+def _add_reproduce(sub) -> None:
+    """The parser of ``pes reproduce``."""
     p = sub.add_parser(
         "reproduce",
         help="run the paper's experiments: tables IV-VI and figures 6-13",
@@ -828,6 +842,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reproduce)
 
+
+def _add_tune(sub) -> None:
+    """The parser of ``pes tune``."""
+    from pes.algos import ALGOS  # noqa: PLC0415 - loads every learner
+
     p = sub.add_parser(
         "tune",
         help="the same hyper-parameter search for any learner",
@@ -891,6 +910,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: results/tuning/ALGO)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_tune)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = OneLineParser(
+        prog="pes",
+        description="PES: multi-quadcopter pursuit-evasion (Game of Drones, TNNLS 2022).",
+    )
+    parser.add_argument("--version", action="version", version=f"pes {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
+    sub.required = True
+    _add_demo(sub)
+    _add_eval(sub)
+    _add_render(sub)
+    _add_view(sub)
+    _add_train(sub)
+    _add_bench(sub)
+    _add_export_onnx(sub)
+    _add_reproduce(sub)
+    _add_tune(sub)
     return parser
 
 

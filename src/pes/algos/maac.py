@@ -104,7 +104,8 @@ MAAC_TUNED: dict[str, Any] = dict(lr_actor=1.08e-3, lr_critic=7.87e-4, hidden=64
 """The learning rates of the best of MAAC's search (results/tuning/maac, trial t05: 0.0 % of
 the held-out episodes after 1,000,000 env steps, the best mean reward; the search began at
 lr_actor 5e-4, lr_critic 1e-3, target_entropy -2, hidden 64). Its target entropy (-4) is not
-kept: the presets follow SAC's rule, -dim(A) = -2 per pursuer."""
+kept: the presets follow SAC's rule, -dim(A) = -2 per pursuer, which the search no longer
+moves."""
 
 MAAC_PRESETS: dict[str, dict[str, Any]] = {
     "paper": dict(episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
@@ -251,7 +252,6 @@ class MAAC(Learner):
     TUNE_SPACE: ClassVar[dict[str, tuple]] = {
         "lr_actor": ("log", 1e-4, 2e-3),
         "lr_critic": ("log", 3e-4, 3e-3),
-        "target_entropy": ("choice", [-4.0, -2.0, -1.0]),
         "hidden": ("choice", [32, 64, 128]),
         "batch_size": ("choice", [256, 512, 1024]),
         "update_every": ("choice", [16, 32, 64]),

@@ -453,6 +453,11 @@ class PPO(Learner):
         if store.full:
             self._last_value = self.values(after["state"], after["obs_mask"][:, :, 0])
 
+    def episode_reset(self, done: Tensor) -> None:
+        """The demonstrator's controllers start afresh in the environments ``done`` (E,)."""
+        if self.demo is not None:
+            self.demo.reset(done)
+
     def on_restart(self) -> None:
         """A rollout does not span a restart of the environments: it starts afresh."""
         self.buffer.clear()
@@ -620,6 +625,7 @@ class PPO(Learner):
                 )
                 steps += 1
         self.bc_pending = False
+        self.updates += 1  # as the trainer counts it (a resumed run starts from that count)
         return {"bc_loss": bc_sum / max(steps, 1), "critic_loss": v_sum / max(steps, 1)}
 
     # --- saving ----------------------------------------------------------------------------------
@@ -634,12 +640,18 @@ class PPO(Learner):
         return {"actor": self.actor}
 
     def state_dict(self) -> dict[str, Any]:
-        """The demonstrations gathered so far and whether the warm start is still to come."""
+        """The demonstrator's controller state, the demonstrations gathered so far and whether
+        the warm start is still to come."""
         if self.demos is None:
             return {}
-        return {"demos": self.demos.state_dict(), "bc_pending": self.bc_pending}
+        return {
+            "demo": self.demo.state_dict(),
+            "demos": self.demos.state_dict(),
+            "bc_pending": self.bc_pending,
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         if self.demos is not None and "demos" in state:
+            self.demo.load_state_dict(state["demo"])
             self.demos.load_state_dict(state["demos"])
             self.bc_pending = state["bc_pending"]

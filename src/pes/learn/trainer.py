@@ -223,123 +223,154 @@ def train(
     (:mod:`pes.lock`: a second writer fails at once); returns a summary (and writes it to
     ``out/summary.json``)."""
     with folder_lock(out, "pes train"):
-        return _train(cfg, Path(out), learner_cls, resume, progress)
+        return Trainer(cfg, Path(out), learner_cls, resume, progress).run()
 
 
-def _train(
-    cfg: TrainConfig, out: Path, learner_cls: type[Learner], resume: bool, progress: bool
-) -> dict[str, Any]:
-    ckpt_path = out / "checkpoint.pt"
-    if resume and not ckpt_path.is_file():
-        raise CheckpointError(f"nothing to resume: no checkpoint at '{ckpt_path}'")
-    if not resume and ckpt_path.exists():
-        raise ConfigError(
-            f"'{out}' already holds a run; pass --resume to continue it or choose another --out"
+class Trainer:
+    """One training run in its folder. The constructor sets it up (a fresh start, or everything
+    a checkpoint holds); :meth:`run` is the loop, one vector step at a time: :meth:`collect`,
+    :meth:`update`, a log row when one is due (:meth:`log_row`, then :meth:`keep_best` and
+    :meth:`curricula`), a checkpoint when one is due, until a budget or a signal stops it;
+    then :meth:`finish` writes the checkpoint, ``policy.pt`` and ``summary.json``."""
+
+    def __init__(
+        self, cfg: TrainConfig, out: Path, learner_cls: type[Learner], resume: bool, progress: bool
+    ) -> None:
+        self.cfg, self.out, self.learner_cls, self.progress = cfg, out, learner_cls, progress
+        self.ckpt_path = out / "checkpoint.pt"
+        if resume and not self.ckpt_path.is_file():
+            raise CheckpointError(f"nothing to resume: no checkpoint at '{self.ckpt_path}'")
+        if not resume and self.ckpt_path.exists():
+            raise ConfigError(
+                f"'{out}' already holds a run; pass --resume to continue it or choose another --out"
+            )
+        out.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(out)
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        self.device = resolve_device(cfg.device)
+        self.protocol = cfg.protocol
+        torch.manual_seed(cfg.seed)
+        self.env_cfg = learner_cls.adapt_env(cfg.env_config())
+        self.learner = learner_cls(cfg, self.env_cfg, self.device)
+        self.gen = torch.Generator().manual_seed(cfg.seed)
+        self.prog = Progress()
+        self.best_state: dict[str, Any] | None = None
+        ckpt = self._restore() if resume else self._start()
+        self.aids = learner_cls.aids(self.protocol)
+        write_text_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
+
+        self.env, self.obs, self.info = self.start_env()
+        self.top_speed = self.env_cfg.evader_max_speed
+        self.logger = RunLogger(
+            out, cfg.tensorboard, resume, self.prog.log_rows, self.prog.episodes
         )
-    out.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out)
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
-    device = resolve_device(cfg.device)
-    protocol = cfg.protocol
+        self.window: dict[str, list] = {"success": [], "steps": [], "reward": [], "crashes": []}
+        self.demo_in_row = False  # whether the demonstrator played (part of) this log row
+        self.stats_sum: dict[str, float] = {}
+        self.stats_count: dict[str, int] = {}
+        self.reward_sum = torch.zeros(cfg.num_envs, device=self.device)
+        self.next_row = (self.prog.episodes // cfg.log_every + 1) * cfg.log_every
+        if ckpt is not None:
+            self._restore_live(ckpt)
+        self._start_clocks()
 
-    torch.manual_seed(cfg.seed)
-    env_cfg = learner_cls.adapt_env(cfg.env_config())
-    learner = learner_cls(cfg, env_cfg, device)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    prog = Progress()
-    best_state: dict[str, Any] | None = None
-    if resume:
-        ckpt = load_file(ckpt_path, CHECKPOINT_FORMAT)
-        _check_resumable(ckpt["train_config"], cfg, ckpt_path)
-        load_modules(learner.modules(), ckpt["modules"], str(ckpt_path))
-        for name, opt in learner.optimizers().items():
-            opt.load_state_dict(ckpt["optimizers"][name])
-        if "buffer" in ckpt:
-            learner.buffer.load_state_dict(ckpt["buffer"])
-        prog = Progress(**ckpt["progress"])
-        if "cpus" not in ckpt["progress"] and prog.env_steps:  # a checkpoint older than the record
-            prog.cpus = ["unrecorded CPU"]
-        learner.updates = prog.updates
-        best_state = ckpt.get("best_policy")
-        # what the lost stretch after the checkpoint wrote goes: its snapshots, its best policy
-        for snap in (out / "snapshots").glob("ep*.pt"):
-            if int(snap.stem[2:]) > prog.episodes:
-                snap.unlink()
-        if best_state is not None:
-            save_atomic(best_state, out / "best_policy.pt")
-        else:
-            (out / "best_policy.pt").unlink(missing_ok=True)
-    else:
+    # --- setup ----------------------------------------------------------------------------------
+    def _start(self) -> None:
+        """A fresh run: the networks of ``init_from`` (recorded), the curricula's first stage."""
+        cfg, prog, protocol = self.cfg, self.prog, self.protocol
         if cfg.init_from:  # record which checkpoint it was: the source run may go on
-            source = init_networks(learner, cfg)
-            write_text_atomic(out / "init_from.json", json.dumps(source, indent=2) + "\n")
+            source = init_networks(self.learner, cfg)
+            write_text_atomic(self.out / "init_from.json", json.dumps(source, indent=2) + "\n")
         if protocol.speed_curriculum is not None:
             prog.evader_speed = protocol.speed_curriculum.start
         if protocol.crash_curriculum is not None and protocol.crash_curriculum.disable_at == 0:
             prog.crashes_disable = True
-    aids = learner_cls.aids(protocol)
-    write_text_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
 
-    def checkpoint() -> None:
-        payload = {
-            "format": CHECKPOINT_FORMAT,
-            "version": VERSION,
-            "algo": cfg.algo,
-            "train_config": to_dict(cfg),
-            "env_config": to_dict(env_cfg),
-            "modules": {k: m.state_dict() for k, m in learner.modules().items()},
-            "optimizers": {k: o.state_dict() for k, o in learner.optimizers().items()},
-            "learner": learner.state_dict(),
-            "rng": {"torch": torch.get_rng_state(), "sampler": gen.get_state()},
-            "progress": vars(prog).copy(),
-            "torch": str(torch.__version__),
-        }
-        if best_state is not None:
-            payload["best_policy"] = best_state
-        if cfg.checkpoint_buffer and hasattr(learner, "buffer"):
-            payload["buffer"] = learner.buffer.state_dict()
-        # the episodes in flight and the log row being gathered, so that a resumed run goes
-        # on exactly as the run would have
-        payload["live"] = {
-            "env": {k: v.cpu() for k, v in env.get_state().items()},
-            "obs": obs.cpu(),
-            "info": {k: v.cpu() for k, v in info.items()},
-            "reward_sum": reward_sum.cpu(),
-            "window": window,
-            "demo_in_row": demo_in_row,
-            "stats_sum": stats_sum,
-            "stats_count": stats_count,
-            "next_row": next_row,
-        }
-        save_atomic(payload, ckpt_path)
+    def _restore(self) -> dict[str, Any]:
+        """Networks, optimisers, buffer, counters and best policy from the checkpoint; what the
+        lost stretch after it wrote goes (its snapshots, its best policy). Returns it."""
+        cfg, learner, out = self.cfg, self.learner, self.out
+        ckpt = load_file(self.ckpt_path, CHECKPOINT_FORMAT)
+        _check_resumable(ckpt["train_config"], cfg, self.ckpt_path)
+        load_modules(learner.modules(), ckpt["modules"], str(self.ckpt_path))
+        for name, opt in learner.optimizers().items():
+            opt.load_state_dict(ckpt["optimizers"][name])
+        if "buffer" in ckpt:
+            learner.buffer.load_state_dict(ckpt["buffer"])
+        self.prog = prog = Progress(**ckpt["progress"])
+        if "cpus" not in ckpt["progress"] and prog.env_steps:  # older than the record
+            prog.cpus = ["unrecorded CPU"]
+        learner.updates = prog.updates
+        self.best_state = ckpt.get("best_policy")
+        for snap in (out / "snapshots").glob("ep*.pt"):
+            if int(snap.stem[2:]) > prog.episodes:
+                snap.unlink()
+        if self.best_state is not None:
+            save_atomic(self.best_state, out / "best_policy.pt")
+        else:
+            (out / "best_policy.pt").unlink(missing_ok=True)
+        return ckpt
 
-    def meta() -> dict[str, Any]:
-        return {
-            "episodes": prog.episodes,
-            "env_steps": prog.env_steps,
-            "updates": prog.updates,
-            "wall_s": round(prog.wall_s, 1),
-            "cpu_s": round(prog.cpu_s, 1),
-            "seed": cfg.seed,
-            "torch": str(torch.__version__),
-            "torch_threads": torch.get_num_threads(),  # at the end of the run (or this part)
-            "cpus": list(prog.cpus),
-            "crashes_disable": prog.crashes_disable,  # the crash rule it ended under
-        }
+    def _restore_live(self, ckpt: dict[str, Any]) -> None:
+        """The episodes in flight, the log row being gathered and the RNG states: the run goes
+        on where its checkpoint was written."""
+        live, device = ckpt["live"], self.device
+        self.env.set_state(live["env"])
+        self.obs = live["obs"].to(device)
+        self.info = {k: v.to(device) for k, v in live["info"].items()}
+        self.reward_sum = live["reward_sum"].to(device)
+        self.window, self.demo_in_row = live["window"], live["demo_in_row"]
+        self.stats_sum, self.stats_count = live["stats_sum"], live["stats_count"]
+        self.next_row = live["next_row"]
+        self.learner.load_state_dict(ckpt["learner"])
+        torch.set_rng_state(ckpt["rng"]["torch"])
+        self.gen.set_state(ckpt["rng"]["sampler"])
 
-    def save_policy(path: Path, info: dict[str, Any]) -> dict[str, Any]:
-        policy = {k: m.state_dict() for k, m in learner.policy_modules().items()}
-        return save_policy_file(path, cfg.algo, to_dict(cfg), to_dict(env_cfg), policy, info)
+    def _start_clocks(self) -> None:
+        """Wall and CPU clocks, limits and the progress bar, from this part of the run on."""
+        cfg, prog = self.cfg, self.prog
+        self.start = time.perf_counter()
+        self.wall0, self.cpu0, self.cpu_start = prog.wall_s, prog.cpu_s, time.process_time()
+        if (cpu := machine_info()["cpu"]) not in prog.cpus:
+            prog.cpus.append(cpu)
+        self.last_ckpt = self.start
+        self.row_start = (self.start, prog.env_steps, prog.updates)
+        self.deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
+        self.cpu_deadline = cfg.cpu_limit * 60.0 if cfg.cpu_limit > 0 else math.inf
+        # The bar counts what the budget counts: env steps under an env_steps budget, else
+        # episodes.
+        self.by_steps = cfg.env_steps > 0
+        total, done_so_far = (
+            (cfg.env_steps, prog.env_steps) if self.by_steps else (cfg.episodes, prog.episodes)
+        )
+        unit = "env steps" if self.by_steps else "ep"
+        self.total = total
+        self.bar = tqdm(
+            total=total,
+            initial=min(done_so_far, total),
+            unit_scale=self.by_steps,
+            desc=f"train {cfg.algo} ({self.protocol.name})",
+            disable=not self.progress,
+            dynamic_ncols=True,
+            # tqdm's own estimate counts one budget only: "left" below knows the other limits.
+            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
+            + unit
+            + " [{elapsed}{postfix}]",
+        )
+        self.first_episode, self.first_steps = prog.episodes, prog.env_steps
+        self.row: dict[str, float] | None = None  # the latest log row
+        self.shown = -math.inf  # when the bar's figures were last refreshed
 
-    def start_env():
+    def start_env(self):
         """The training environments, every episode fresh: at a start, seeded by the episodes
         already played, and when the crash rule switches."""
-        crash_mode = "disable" if prog.crashes_disable else env_cfg.crash_mode
+        cfg, prog = self.cfg, self.prog
+        crash_mode = "disable" if prog.crashes_disable else self.env_cfg.crash_mode
         env = make_env(
-            env_cfg.replace(crash_mode=crash_mode),
+            self.env_cfg.replace(crash_mode=crash_mode),
             num_envs=cfg.num_envs,
-            device=device,
+            device=self.device,
             seed=cfg.seed * 1_000_003 + prog.episodes,
             compile=cfg.compile_env,
             wait_kernels=True,  # every step of a run on the same path
@@ -347,64 +378,265 @@ def _train(
         if prog.evader_speed > 0:
             env.set_evader_max_speed(prog.evader_speed)
         obs, info = env.reset()
-        learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=device))
+        self.learner.episode_reset(torch.ones(cfg.num_envs, dtype=torch.bool, device=self.device))
         return env, obs, info
 
-    env, obs, info = start_env()
-    top_speed = env_cfg.evader_max_speed
-    logger = RunLogger(out, cfg.tensorboard, resume, prog.log_rows, prog.episodes)
-    window: dict[str, list] = {"success": [], "steps": [], "reward": [], "crashes": []}
-    demo_in_row = False  # whether the demonstrator played (part of) this log row
-    stats_sum: dict[str, float] = {}
-    stats_count: dict[str, int] = {}
-    reward_sum = torch.zeros(cfg.num_envs, device=device)
-    next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
-    if resume:  # the run goes on where its checkpoint was written
-        live = ckpt["live"]
-        env.set_state(live["env"])
-        obs = live["obs"].to(device)
-        info = {k: v.to(device) for k, v in live["info"].items()}
-        reward_sum = live["reward_sum"].to(device)
-        window, demo_in_row = live["window"], live["demo_in_row"]
-        stats_sum, stats_count = live["stats_sum"], live["stats_count"]
-        next_row = live["next_row"]
-        learner.load_state_dict(ckpt["learner"])
-        torch.set_rng_state(ckpt["rng"]["torch"])
-        gen.set_state(ckpt["rng"]["sampler"])
-    start = time.perf_counter()
-    wall0, cpu0, cpu_start = prog.wall_s, prog.cpu_s, time.process_time()
-    if (cpu := machine_info()["cpu"]) not in prog.cpus:
-        prog.cpus.append(cpu)
-    last_ckpt = start
-    row_start = (start, prog.env_steps, prog.updates)
-    deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
-    cpu_deadline = cfg.cpu_limit * 60.0 if cfg.cpu_limit > 0 else math.inf
-    # The bar counts what the budget counts: env steps under an env_steps budget, else episodes.
-    by_steps = cfg.env_steps > 0
-    total, done_so_far = (
-        (cfg.env_steps, prog.env_steps) if by_steps else (cfg.episodes, prog.episodes)
-    )
-    unit = "env steps" if by_steps else "ep"
-    bar = tqdm(
-        total=total,
-        initial=min(done_so_far, total),
-        unit_scale=by_steps,
-        desc=f"train {cfg.algo} ({protocol.name})",
-        disable=not progress,
-        dynamic_ncols=True,
-        # tqdm's own estimate counts one budget only: "left" below also knows the other limits.
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
-        + unit
-        + " [{elapsed}{postfix}]",
-    )
-    first_episode, first_steps = prog.episodes, prog.env_steps
-    row: dict[str, float] | None = None  # the latest log row
-    shown = -math.inf  # when the bar's figures were last refreshed
+    # --- the loop -------------------------------------------------------------------------------
+    def run(self) -> dict[str, Any]:
+        """Train until a budget or a signal stops the run; returns its summary (evaluated when
+        ``eval_episodes``)."""
+        cfg, prog = self.cfg, self.prog
+        stopped_by = "episodes"
+        with StopSignals() as signals:
+            try:
+                while prog.episodes < cfg.episodes:
+                    self.collect()
+                    self.update()
+                    now = time.perf_counter()
+                    prog.wall_s = self.wall0 + now - self.start
+                    prog.cpu_s = self.cpu0 + time.process_time() - self.cpu_start
+                    if prog.episodes >= self.next_row and self.window["success"]:
+                        row = self.log_row(now)
+                        self.keep_best(row)
+                        self.curricula(row)
+                        self._next_row(now)
+                    if (
+                        cfg.checkpoint_every > 0
+                        and now - self.last_ckpt >= cfg.checkpoint_every * 60
+                    ):
+                        self.checkpoint()
+                        self.last_ckpt = time.perf_counter()
+                    reason = self.stop_reason(signals.requested)
+                    if reason:
+                        stopped_by = reason
+                        break
+            finally:
+                self.bar.close()
+                self.logger.close()
+            summary = self.finish(stopped_by)
+        if cfg.eval_episodes > 0:
+            summary["eval"] = evaluate_run(
+                self.learner_cls, self.out / "policy.pt", cfg, cfg.eval_episodes, self.progress
+            )
+            write_text_atomic(self.out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        return summary
 
-    def show(now: float) -> None:
+    def collect(self) -> None:
+        """One vector step: act, step the environments, record; the finished episodes counted."""
+        cfg, prog, learner, window = self.cfg, self.prog, self.learner, self.window
+        scale = self.noise_scale = self.protocol.noise.scale(prog.episodes)
+        self.demo_in_row |= learner.demonstrating()
+        actions, evader_actions = learner.act(self.obs, self.info, scale, self.gen)
+        alive = self.info["obs_mask"][:, :, 0].float()
+        obs2, reward, terminated, truncated, info2 = self.env.step(actions, evader_actions)
+        learner.record(self.info, actions, evader_actions, reward, terminated, info2)
+        self.reward_sum += (reward * alive).sum(-1) / alive.sum(-1).clamp(min=1.0)
+        prog.env_steps += cfg.num_envs
+        if self.by_steps:
+            self.bar.update(min(cfg.num_envs, max(0, self.total - self.bar.n)))  # stop at total
+        done = terminated | truncated
+        if bool(done.any()):
+            idx = torch.nonzero(done).flatten()
+            steps = info2["steps"][idx].float()
+            window["success"] += info2["success"][idx].tolist()
+            window["steps"] += steps.tolist()
+            window["reward"] += (self.reward_sum[idx] / steps).tolist()
+            window["crashes"] += info2["crashes"][idx].tolist()
+            self.reward_sum[idx] = 0.0
+            learner.episode_reset(done)
+            prog.episodes += len(idx)
+            if not self.by_steps:
+                self.bar.update(len(idx))
+            if self.progress and time.perf_counter() - self.shown >= 1.0:
+                self.show(time.perf_counter())
+        self.obs, self.info = obs2, info2
+
+    def update(self) -> None:
+        """The updates this step earned, their metrics gathered for the log row."""
+        learner, prog = self.learner, self.prog
+        if not learner.ready():
+            return
+        prog.update_credit += learner.update_credit()
+        while prog.update_credit >= 1.0:
+            for k, v in learner.update(self.gen).items():
+                self.stats_sum[k] = self.stats_sum.get(k, 0.0) + v
+                self.stats_count[k] = self.stats_count.get(k, 0) + 1
+            prog.updates += 1
+            prog.update_credit -= 1.0
+
+    def log_row(self, now: float) -> dict[str, float]:
+        """Write the log row of the episodes since the last one (and a snapshot); returns it."""
+        prog, window = self.prog, self.window
+        dt = max(now - self.row_start[0], 1e-9)
+        row = {
+            "episodes": prog.episodes,
+            "env_steps": prog.env_steps,
+            "updates": prog.updates,
+            "wall_s": round(prog.wall_s, 1),
+            "cpu_s": round(prog.cpu_s, 1),
+            "success_rate": sum(window["success"]) / len(window["success"]),
+            "avg_reward": sum(window["reward"]) / len(window["reward"]),
+            "episode_steps": sum(window["steps"]) / len(window["steps"]),
+            "crashes": sum(window["crashes"]) / len(window["crashes"]),
+            "noise": self.noise_scale,  # the exploration scale of the row's last step
+            "env_steps_per_s": (prog.env_steps - self.row_start[1]) / dt,
+            "updates_per_s": (prog.updates - self.row_start[2]) / dt,
+            "evader_speed": self.env.evader_max_speed,
+            "crashes_disable": int(prog.crashes_disable),
+            "demonstrating": int(self.demo_in_row),
+        }
+        row.update({k: v / self.stats_count[k] for k, v in self.stats_sum.items()})
+        self.logger.write(row)
+        prog.log_rows += 1
+        if self.cfg.snapshots:
+            (self.out / "snapshots").mkdir(exist_ok=True)
+            self.save_policy(self.out / "snapshots" / f"ep{prog.episodes:06d}.pt", self.meta())
+        self.row = row
+        return row
+
+    def keep_best(self, row: dict[str, float]) -> None:
+        """``best_policy.pt`` follows the row with the best training score. Ties go to the later
+        row: a run that never captures keeps its latest policy, not its first, barely trained
+        one. A row that the demonstrator played (partly) measures the demonstrator, not the
+        learner: it does not count."""
+        score = self.learner.score(row["success_rate"], row["episode_steps"])
+        if score >= self.prog.best_score and not self.demo_in_row:
+            self.prog.best_score = score
+            self.best_state = self.save_policy(
+                self.out / "best_policy.pt", {**self.meta(), "best_at": self.prog.episodes}
+            )
+
+    def curricula(self, row: dict[str, float]) -> None:
+        """The protocol's curricula after a log row (never on a row the demonstrator played):
+        a faster evader, or crashes that disable from now on; the best policy is then sought
+        afresh (success rates under other rules do not compare)."""
+        prog, speed, crash = (
+            self.prog,
+            self.protocol.speed_curriculum,
+            self.protocol.crash_curriculum,
+        )
+        if self.demo_in_row:
+            return
+        if (
+            speed is not None
+            and prog.evader_speed < self.top_speed
+            and row["success_rate"] >= speed.success
+        ):  # harder from the next step on
+            prog.evader_speed = min(self.top_speed, prog.evader_speed + speed.step)
+            self.env.set_evader_max_speed(prog.evader_speed)
+            prog.best_score = -math.inf
+        if (
+            crash is not None
+            and not prog.crashes_disable
+            and crash.disable_at <= row["success_rate"]
+        ):  # the episodes in flight are abandoned, as at a resume
+            prog.crashes_disable = True
+            self.learner.on_restart()
+            self.env, self.obs, self.info = self.start_env()
+            self.reward_sum.zero_()
+            prog.best_score = -math.inf
+
+    def _next_row(self, now: float) -> None:
+        """Start gathering the next log row."""
+        self.window = {k: [] for k in self.window}
+        self.demo_in_row = False
+        self.stats_sum, self.stats_count = {}, {}
+        self.row_start = (now, self.prog.env_steps, self.prog.updates)
+        self.next_row = (self.prog.episodes // self.cfg.log_every + 1) * self.cfg.log_every
+
+    def stop_reason(self, interrupted: bool) -> str | None:
+        """Why the run stops now (a limit reached, a signal), or None."""
+        cfg, prog = self.cfg, self.prog
+        if prog.wall_s >= self.deadline:
+            return "time_limit"
+        if prog.cpu_s >= self.cpu_deadline:
+            return "cpu_limit"
+        if cfg.env_steps and prog.env_steps >= cfg.env_steps:
+            return "env_steps"
+        return "interrupted" if interrupted else None
+
+    # --- what a run writes ----------------------------------------------------------------------
+    def finish(self, stopped_by: str) -> dict[str, Any]:
+        """The checkpoint, ``policy.pt`` and ``summary.json`` at the end (an interrupted run
+        raises :class:`TrainingInterruptedError` after writing them); returns the summary."""
+        self.checkpoint()
+        final = {**self.meta(), "stopped_by": stopped_by}
+        self.save_policy(self.out / "policy.pt", final)
+        summary: dict[str, Any] = {
+            "algo": self.cfg.algo,
+            "protocol": self.protocol.name,
+            "aids": self.aids,
+            "out": str(self.out),
+            **final,
+        }
+        write_text_atomic(self.out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        if stopped_by == "interrupted":
+            raise TrainingInterruptedError(
+                f"interrupted after {self.prog.episodes} episodes; checkpoint written, continue "
+                f"with --resume --out {self.out}"
+            )
+        return summary
+
+    def checkpoint(self) -> None:
+        """Everything the run needs to go on exactly as it would have, written atomically."""
+        cfg, learner = self.cfg, self.learner
+        payload = {
+            "format": CHECKPOINT_FORMAT,
+            "version": VERSION,
+            "algo": cfg.algo,
+            "train_config": to_dict(cfg),
+            "env_config": to_dict(self.env_cfg),
+            "modules": {k: m.state_dict() for k, m in learner.modules().items()},
+            "optimizers": {k: o.state_dict() for k, o in learner.optimizers().items()},
+            "learner": learner.state_dict(),
+            "rng": {"torch": torch.get_rng_state(), "sampler": self.gen.get_state()},
+            "progress": vars(self.prog).copy(),
+            "torch": str(torch.__version__),
+        }
+        if self.best_state is not None:
+            payload["best_policy"] = self.best_state
+        if cfg.checkpoint_buffer and hasattr(learner, "buffer"):
+            payload["buffer"] = learner.buffer.state_dict()
+        # the episodes in flight and the log row being gathered, so that a resumed run goes
+        # on exactly as the run would have
+        payload["live"] = {
+            "env": {k: v.cpu() for k, v in self.env.get_state().items()},
+            "obs": self.obs.cpu(),
+            "info": {k: v.cpu() for k, v in self.info.items()},
+            "reward_sum": self.reward_sum.cpu(),
+            "window": self.window,
+            "demo_in_row": self.demo_in_row,
+            "stats_sum": self.stats_sum,
+            "stats_count": self.stats_count,
+            "next_row": self.next_row,
+        }
+        save_atomic(payload, self.ckpt_path)
+
+    def meta(self) -> dict[str, Any]:
+        """The run's counters, as policy files and the summary record them."""
+        prog = self.prog
+        return {
+            "episodes": prog.episodes,
+            "env_steps": prog.env_steps,
+            "updates": prog.updates,
+            "wall_s": round(prog.wall_s, 1),
+            "cpu_s": round(prog.cpu_s, 1),
+            "seed": self.cfg.seed,
+            "torch": str(torch.__version__),
+            "torch_threads": torch.get_num_threads(),  # at the end of the run (or this part)
+            "cpus": list(prog.cpus),
+            "crashes_disable": prog.crashes_disable,  # the crash rule it ended under
+        }
+
+    def save_policy(self, path: Path, info: dict[str, Any]) -> dict[str, Any]:
+        policy = {k: m.state_dict() for k, m in self.learner.policy_modules().items()}
+        cfg = self.cfg
+        return save_policy_file(path, cfg.algo, to_dict(cfg), to_dict(self.env_cfg), policy, info)
+
+    def show(self, now: float) -> None:
         """The bar's figures: success, steps and reward of the episodes finished since the
         last log row (else that row's), and the time left by the episodes or the time limit."""
-        nonlocal shown
+        cfg, prog, window, row = self.cfg, self.prog, self.window, self.row
         recent = window if window["success"] else None
         if recent is None and row is None:
             return
@@ -417,12 +649,12 @@ def _train(
             "steps": mean("steps") if recent else row["episode_steps"],
             "reward": mean("reward") if recent else row["avg_reward"],
         }
-        run_s = now - start
-        done_here = prog.episodes - first_episode
-        left = min(deadline - prog.wall_s, cpu_deadline - prog.cpu_s)
+        run_s = now - self.start
+        done_here = prog.episodes - self.first_episode
+        left = min(self.deadline - prog.wall_s, self.cpu_deadline - prog.cpu_s)
         if done_here > 0:
             left = min(left, (cfg.episodes - prog.episodes) * run_s / done_here)
-        steps_here = prog.env_steps - first_steps
+        steps_here = prog.env_steps - self.first_steps
         if cfg.env_steps and steps_here > 0:
             left = min(left, (cfg.env_steps - prog.env_steps) * run_s / steps_here)
         shown_figures = {
@@ -433,158 +665,8 @@ def _train(
         if prog.evader_speed:
             shown_figures["evader"] = f"{prog.evader_speed:g}m/s"
         shown_figures["left"] = tqdm.format_interval(max(left, 0.0)) if math.isfinite(left) else "?"
-        bar.set_postfix(shown_figures)  # a dict keeps this order (keywords would be sorted)
-        shown = now
-
-    stopped_by = "episodes"
-    with StopSignals() as signals:
-        try:
-            while prog.episodes < cfg.episodes:
-                scale = protocol.noise.scale(prog.episodes)
-                demo_in_row |= learner.demonstrating()
-                actions, evader_actions = learner.act(obs, info, scale, gen)
-                alive = info["obs_mask"][:, :, 0].float()
-                obs2, reward, terminated, truncated, info2 = env.step(actions, evader_actions)
-                learner.record(info, actions, evader_actions, reward, terminated, info2)
-                reward_sum += (reward * alive).sum(-1) / alive.sum(-1).clamp(min=1.0)
-                prog.env_steps += cfg.num_envs
-                if by_steps:
-                    bar.update(min(cfg.num_envs, max(0, total - bar.n)))  # stop at the total
-                done = terminated | truncated
-                if bool(done.any()):
-                    idx = torch.nonzero(done).flatten()
-                    steps = info2["steps"][idx].float()
-                    window["success"] += info2["success"][idx].tolist()
-                    window["steps"] += steps.tolist()
-                    window["reward"] += (reward_sum[idx] / steps).tolist()
-                    window["crashes"] += info2["crashes"][idx].tolist()
-                    reward_sum[idx] = 0.0
-                    learner.episode_reset(done)
-                    prog.episodes += len(idx)
-                    if not by_steps:
-                        bar.update(len(idx))
-                    if progress and time.perf_counter() - shown >= 1.0:
-                        show(time.perf_counter())
-                obs, info = obs2, info2
-
-                if learner.ready():
-                    prog.update_credit += learner.update_credit()
-                    while prog.update_credit >= 1.0:
-                        for k, v in learner.update(gen).items():
-                            stats_sum[k] = stats_sum.get(k, 0.0) + v
-                            stats_count[k] = stats_count.get(k, 0) + 1
-                        prog.updates += 1
-                        prog.update_credit -= 1.0
-
-                now = time.perf_counter()
-                prog.wall_s = wall0 + now - start
-                prog.cpu_s = cpu0 + time.process_time() - cpu_start
-                if prog.episodes >= next_row and window["success"]:
-                    dt = max(now - row_start[0], 1e-9)
-                    row = {
-                        "episodes": prog.episodes,
-                        "env_steps": prog.env_steps,
-                        "updates": prog.updates,
-                        "wall_s": round(prog.wall_s, 1),
-                        "cpu_s": round(prog.cpu_s, 1),
-                        "success_rate": sum(window["success"]) / len(window["success"]),
-                        "avg_reward": sum(window["reward"]) / len(window["reward"]),
-                        "episode_steps": sum(window["steps"]) / len(window["steps"]),
-                        "crashes": sum(window["crashes"]) / len(window["crashes"]),
-                        "noise": scale,
-                        "env_steps_per_s": (prog.env_steps - row_start[1]) / dt,
-                        "updates_per_s": (prog.updates - row_start[2]) / dt,
-                        "evader_speed": env.evader_max_speed,
-                        "crashes_disable": int(prog.crashes_disable),
-                        "demonstrating": int(demo_in_row),
-                    }
-                    row.update({k: v / stats_count[k] for k, v in stats_sum.items()})
-                    logger.write(row)
-                    prog.log_rows += 1
-                    if cfg.snapshots:
-                        (out / "snapshots").mkdir(exist_ok=True)
-                        save_policy(out / "snapshots" / f"ep{prog.episodes:06d}.pt", meta())
-                    score = learner.score(row["success_rate"], row["episode_steps"])
-                    # Ties go to the later row: a run that never captures keeps its latest
-                    # policy, not its first, barely trained one. A row that the demonstrator
-                    # played (partly) measures the demonstrator, not the learner: it neither
-                    # counts for best_policy.pt nor advances a curriculum.
-                    if score >= prog.best_score and not demo_in_row:
-                        prog.best_score = score
-                        best_state = save_policy(
-                            out / "best_policy.pt", {**meta(), "best_at": prog.episodes}
-                        )
-                    speed = protocol.speed_curriculum
-                    if (
-                        speed is not None
-                        and prog.evader_speed < top_speed
-                        and not demo_in_row
-                        and row["success_rate"] >= speed.success
-                    ):
-                        # Harder from the next step on; the best policy is then sought afresh
-                        # at the new speed (success rates at different speeds do not compare).
-                        prog.evader_speed = min(top_speed, prog.evader_speed + speed.step)
-                        env.set_evader_max_speed(prog.evader_speed)
-                        prog.best_score = -math.inf
-                    crash = protocol.crash_curriculum
-                    if (
-                        crash is not None
-                        and crash.disable_at <= row["success_rate"]
-                        and not prog.crashes_disable
-                        and not demo_in_row
-                    ):
-                        # Crashes disable from now on: the episodes in flight are abandoned (as
-                        # at a resume) and the best policy is sought afresh under the new rule.
-                        prog.crashes_disable = True
-                        learner.on_restart()
-                        env, obs, info = start_env()
-                        reward_sum.zero_()
-                        prog.best_score = -math.inf
-                    window = {k: [] for k in window}
-                    demo_in_row = False
-                    stats_sum, stats_count = {}, {}
-                    row_start = (now, prog.env_steps, prog.updates)
-                    next_row = (prog.episodes // cfg.log_every + 1) * cfg.log_every
-                if cfg.checkpoint_every > 0 and now - last_ckpt >= cfg.checkpoint_every * 60.0:
-                    checkpoint()
-                    last_ckpt = time.perf_counter()
-                if prog.wall_s >= deadline:
-                    stopped_by = "time_limit"
-                    break
-                if prog.cpu_s >= cpu_deadline:
-                    stopped_by = "cpu_limit"
-                    break
-                if cfg.env_steps and prog.env_steps >= cfg.env_steps:
-                    stopped_by = "env_steps"
-                    break
-                if signals.requested:
-                    stopped_by = "interrupted"
-                    break
-        finally:
-            bar.close()
-            logger.close()
-        checkpoint()
-        final = {**meta(), "stopped_by": stopped_by}
-        save_policy(out / "policy.pt", final)
-        summary: dict[str, Any] = {
-            "algo": cfg.algo,
-            "protocol": protocol.name,
-            "aids": aids,
-            "out": str(out),
-            **final,
-        }
-        write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-        if stopped_by == "interrupted":
-            raise TrainingInterruptedError(
-                f"interrupted after {prog.episodes} episodes; checkpoint written, continue with "
-                f"--resume --out {out}"
-            )
-    if cfg.eval_episodes > 0:
-        summary["eval"] = evaluate_run(
-            learner_cls, out / "policy.pt", cfg, cfg.eval_episodes, progress
-        )
-        write_text_atomic(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    return summary
+        self.bar.set_postfix(shown_figures)  # a dict keeps this order (keywords would be sorted)
+        self.shown = now
 
 
 def init_networks(learner: Learner, cfg: TrainConfig) -> dict[str, Any]:
