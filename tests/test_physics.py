@@ -397,8 +397,9 @@ def _rollout_clearance(num_envs: int, steps: int, seed: int = 0) -> tuple[float,
 
 
 def test_no_centre_within_the_body_radius_of_any_obstacle():
-    """Collisions leave both walls of a corner and every building face at once (issue 30:
-    a pursuer sat at (0.138, 0.301) in a corner, centres ended up outside the arena)."""
+    """Collisions leave both walls of a corner and every building face at once (docs/scenario.md,
+    "Collisions"): a pursuer once sat at (0.138, 0.301) in a corner, and centres ended up
+    outside the arena."""
     worst, contacts = _rollout_clearance(64, 300)
     assert contacts > 100  # the rollout does reach the walls
     assert worst >= -1e-5, f"a centre {-worst:.4f} m inside the body radius"

@@ -1,4 +1,4 @@
-"""Property-based checks of the input contract (SPEC §5, issue 30), with Hypothesis.
+"""Property-based checks of the input contract (docs/interfaces.md), with Hypothesis.
 
 For generated scenario configs, layout files, episode records and actions, the library either
 runs correctly or raises a :class:`pes.errors.PESError` whose message is one line and names the

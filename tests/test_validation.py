@@ -1,5 +1,5 @@
 """Bad input of every kind gets a one-line PESError (a one-line ``error:`` and exit 2 on the
-command line), never a traceback and never a silent fix (SPEC §5, issue 30)."""
+command line), never a traceback and never a silent fix (docs/interfaces.md, docs/cli.md)."""
 
 from __future__ import annotations
 

@@ -27,7 +27,7 @@ EXIT_USER_ERROR = 2
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An argument parser whose mistakes end in one line on stderr and exit status 2 (SPEC §5),
+    """An argument parser whose mistakes end in one line on stderr and exit status 2 (docs/cli.md),
     not argparse's usage block; ``--help`` still prints the full usage."""
 
     def error(self, message: str) -> NoReturn:

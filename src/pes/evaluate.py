@@ -5,12 +5,13 @@ episodes in advance (environment ``i`` plays episodes ``i, i + E, i + 2E, ...``)
 result does not favour short episodes and is the same for the same seed whatever the speed of
 the machine.
 
-Metrics (SPEC §4): ``success_rate`` (captures / episodes), ``mean_steps`` (mean episode length
-over all episodes, failures at the limit included), ``mean_reward`` ("average reward": each
-episode's total reward divided by its steps, averaged over episodes; the total reward of a step
-is the mean over the pursuers alive at its start). A failure is either ``lost`` (fewer
-pursuers left alive than the capture needs: the episode ends early) or ``timeout`` (the evader
-still free at the step limit); ``lost_rate`` and ``timeout_rate`` split the failures so.
+Metrics (as ``pes eval`` reports them, docs/cli.md): ``success_rate`` (captures / episodes),
+``mean_steps`` (mean episode length over all episodes, failures at the limit included),
+``mean_reward`` ("average reward": each episode's total reward divided by its steps, averaged
+over episodes; the total reward of a step is the mean over the pursuers alive at its start). A
+failure is either ``lost`` (fewer pursuers left alive than the capture needs: the episode ends
+early) or ``timeout`` (the evader still free at the step limit); ``lost_rate`` and
+``timeout_rate`` split the failures so.
 """
 
 from __future__ import annotations

@@ -31,10 +31,10 @@ learners can mask it; its actions are ignored.
 
 Auto-reset and TorchRL's partial reset
 --------------------------------------
-The simulator resets finished games inside ``step`` (SPEC §5) and keeps the last observation
-of the finished episode in ``info["final_obs"]``. TorchRL instead expects ``_step`` to return
-that last observation and a later ``_reset`` with a ``"_reset"`` mask to start the next
-episode. This adapter reconciles the two without stepping anything twice:
+The simulator resets finished games inside ``step`` (docs/interfaces.md) and keeps the last
+observation of the finished episode in ``info["final_obs"]``. TorchRL instead expects ``_step``
+to return that last observation and a later ``_reset`` with a ``"_reset"`` mask to start the
+next episode. This adapter reconciles the two without stepping anything twice:
 
 * ``_step`` returns the finished episode's last observation (``final_obs``, ``final_state``,
   ...) as ``"next"``, and keeps the simulator's post-reset observation of every game aside.

@@ -1,4 +1,4 @@
-"""A trained CBC-TP (or CBC) swarm as one ONNX graph, toward real vehicles (SPEC §1.5, §5).
+"""A trained CBC-TP (or CBC) swarm as one ONNX graph, toward real vehicles (docs/export.md).
 
 The graph holds TP Net and the actor: from every pursuer's Table I observation, the alive mask
 and the history window it returns every pursuer's desired acceleration, for any number of

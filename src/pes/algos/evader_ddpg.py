@@ -1,4 +1,4 @@
-"""The DDPG evader (SPEC §2, "Evader policies"): trained in the PES against scripted pursuers,
+"""The DDPG evader (docs/algorithms/evader_ddpg.md): trained in the PES against scripted pursuers,
 then frozen and used as the default opponent of evaluations.
 
 A single DDPG agent (Lillicrap et al.) controls the evader through ``evader_policy="external"``.

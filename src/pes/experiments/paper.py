@@ -1,4 +1,4 @@
-"""The paper's reported numbers (Zhang et al., TNNLS 2022, §V; SPEC §4), set beside ours."""
+"""The paper's reported numbers (Zhang et al., TNNLS 2022, §V), set beside ours."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""``pes reproduce``: run the paper's experiments and write its tables and figures (SPEC §4).
+"""``pes reproduce``: run the paper's experiments and write its tables and figures
+(docs/reproduce.md).
 
     pes reproduce all --budget quick --seeds 3 --out results/quick
 

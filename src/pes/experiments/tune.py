@@ -1,4 +1,5 @@
-"""``pes tune``: the same hyper-parameter search for any learner (SPEC §3, "fair comparison").
+"""``pes tune``: the same hyper-parameter search for any learner (docs/reproduce.md, "A fair
+comparison").
 
     pes tune --algo maddpg --trials 8 --out results/tuning/maddpg
 

@@ -1,6 +1,6 @@
 """What the learners see, rebuilt from the global state that the replay buffer stores.
 
-The buffer keeps one global state per transition (SPEC §2, "the global state"): (A, 8) rows,
+The buffer keeps one global state per transition (docs/scenario.md, "Observations"): (A, 8) rows,
 pursuers first (their Table I self rows, zero when dead) and the evader last. Every pursuer's
 observation, the history windows of TP Net and the inputs of the critic are functions of it, so
 they are recomputed for each sampled minibatch instead of being stored N times.

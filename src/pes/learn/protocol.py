@@ -1,5 +1,5 @@
-"""Training protocols: how a learner is trained here, apart from what the learner is (SPEC §3,
-"Training protocols and fair comparison").
+"""Training protocols: how a learner is trained here, apart from what the learner is
+(docs/training.md, "Training protocols").
 
 A protocol is a set of opt-in aids, each a small dataclass (or a plain value) of
 :class:`Protocol`:

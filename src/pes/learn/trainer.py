@@ -92,13 +92,13 @@ LOG_COLUMNS = (
     "demonstrating",
     "bc_share",
 )
-"""Columns of ``progress.csv``; ``wall_s`` and ``cpu_s`` are the run's wall and process CPU
-seconds so far (CPU: every thread's); ``avg_reward`` is each episode's total (team-mean) training
-reward divided by its steps, averaged over the row's episodes (SPEC §4); ``evader_speed`` the
-evader's speed cap (m/s) during the row's episodes; ``crashes_disable`` 1 when they were played
-with crashes that disable (the protocol's crash curriculum); ``demonstrating`` 1 when the
-demonstrator played (part of) the row; ``bc_share`` the share of actor samples that are
-demonstrations (the protocol's ``bc_weight``)."""
+"""Columns of ``progress.csv`` (docs/training.md, "The run folder"); ``wall_s`` and ``cpu_s``
+are the run's wall and process CPU seconds so far (CPU: every thread's); ``avg_reward`` is each
+episode's total (team-mean) training reward divided by its steps, averaged over the row's
+episodes; ``evader_speed`` the evader's speed cap (m/s) during the row's episodes;
+``crashes_disable`` 1 when they were played with crashes that disable (the protocol's crash
+curriculum); ``demonstrating`` 1 when the demonstrator played (part of) the row; ``bc_share``
+the share of actor samples that are demonstrations (the protocol's ``bc_weight``)."""
 
 # Changing these between a run and its resumption is allowed; anything else is a mismatch.
 RESUMABLE_CHANGES = {

@@ -1,4 +1,4 @@
-"""Episode records (SPEC §5): one episode of one environment as versioned JSON.
+"""Episode records (docs/interfaces.md): one episode of one environment as versioned JSON.
 
 A record holds ``version``, ``config`` (the full ``EnvConfig``), ``arena`` [width, height],
 ``buildings`` ([xmin, ymin, xmax, ymax] each, metres), ``building_heights``, ``altitudes``

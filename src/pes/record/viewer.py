@@ -51,7 +51,7 @@ def _first_step(frames: list[dict[str, Any]], key: str, vehicle: int, flag: bool
 
 
 def scene_data(record: dict[str, Any], title: str = "episode") -> dict[str, Any]:
-    """What the page draws, from an episode record (SPEC §5, :mod:`pes.record.episode`).
+    """What the page draws, from an episode record (docs/interfaces.md, :mod:`pes.record.episode`).
 
     Returns a dict with ``title``, ``arena`` [width, height] (m), ``buildings`` (each
     ``[xmin, ymin, xmax, ymax, height]``, m), ``heights_from`` (``"record"``, ``"config"`` or

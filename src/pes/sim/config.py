@@ -1,4 +1,4 @@
-"""``EnvConfig``: every setting of the pursuit-evasion scenario (SPEC §2, paper §II).
+"""``EnvConfig``: every setting of the pursuit-evasion scenario (docs/scenario.md, paper §II).
 
 Defaults follow the paper where it gives a number and ``docs/scenario.md`` where it does not.
 Units are SI (metres, seconds, kilograms) unless a field says otherwise.

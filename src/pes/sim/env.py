@@ -1,4 +1,5 @@
-"""The batched pursuit-evasion environment (SPEC §5): ``make_env`` and ``PursuitEvasionEnv``."""
+"""The batched pursuit-evasion environment: ``make_env`` and ``PursuitEvasionEnv``
+(docs/interfaces.md)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Compiled CPU kernels for the step: the quadrotors' commands and physics sub-steps, the
 ``flee`` evader, the collisions, capture, rewards and history, and the observations.
 
-An eager torch step spends most of its time dispatching small operations (SPEC §6; measured in
+An eager torch step spends most of its time dispatching small operations (measured in
 docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
 whatever its size. On the CPU, when torch is not compiling the step, those parts run here
 instead, as Numba functions that walk every environment once and keep each vehicle's numbers

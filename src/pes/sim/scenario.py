@@ -1,4 +1,4 @@
-"""The pursuit-evasion scenario as pure batched functions of a packed state (SPEC §2).
+"""The pursuit-evasion scenario as pure batched functions of a packed state (docs/scenario.md).
 
 The state is a dict of four tensors, packed so that a compiled step has few inputs and outputs
 and every field is a contiguous (E, A) block (E environments, A = N pursuers + the evader):
@@ -356,7 +356,7 @@ def history_frame(sc: Scenario, v: Vehicles, alive: Tensor) -> Tensor:
 
 
 def spawn(sc: Scenario, key: Tensor, episode: Tensor) -> dict[str, Tensor]:
-    """Initial states (SPEC §2 "start") of the episodes ``episode`` (E,) of environments
+    """Initial states (docs/scenario.md, "Start") of the episodes ``episode`` (E,) of environments
     ``key`` (E,): pursuers at free spots near the edge, the evader near the centre, at rest."""
     cfg = sc.config
     n = cfg.num_pursuers
