@@ -7,7 +7,8 @@ defaults live in the class. This module turns untrusted input into such a datacl
 * values are checked against the field's type hint (``int``, ``float``, ``bool``, ``str``,
   ``Literal[...]``, ``Optional``, ``tuple``/``list``) and never silently converted, except
   ``int`` -> ``float``;
-* the resolved configuration can be written back to YAML beside a run.
+* :func:`to_dict` turns a configuration back into plain values (a run writes them to YAML
+  beside it).
 
 Field documentation is the attribute docstring written under each field; :func:`field_docs`
 reads it back so that ``docs/`` and ``--help`` show the same text as the code.
@@ -256,11 +257,6 @@ def to_dict(obj: Any) -> dict[str, Any]:
         return v
 
     return {f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-
-
-def save_yaml(obj: Any, path: str | Path) -> None:
-    """Write the resolved configuration ``obj`` to ``path`` as YAML."""
-    Path(path).write_text(yaml.safe_dump(to_dict(obj), sort_keys=False))
 
 
 def field_docs(cls: type) -> dict[str, str]:

@@ -109,10 +109,6 @@ class ReplayBuffer:
         self.next_row = (self.next_row + 1) % self.rows
         self.filled = min(self.filled + 1, self.rows)
 
-    def _age(self, row: Tensor) -> Tensor:
-        """How many adds ago ``row`` was written (0 = the newest)."""
-        return (self.next_row - 1 - row) % self.rows
-
     def sample_index(self, batch: int, generator: torch.Generator, past: int = 0, future: int = 0):
         """Random (row, env) indices of transitions whose ``past`` earlier and ``future`` later
         rows are still stored. Returns two (batch,) long tensors."""

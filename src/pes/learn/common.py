@@ -44,12 +44,6 @@ def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     return (x * w).sum() / w.sum().clamp(min=1.0)
 
 
-def pursuer_score(success_rate: float, episode_steps: float) -> float:
-    """Training score of a log row for pursuer learners (higher is better): success, then
-    speed."""
-    return success_rate - 1e-5 * episode_steps
-
-
 class ActorPolicy(nn.Module):
     """A trained pursuer actor as a :class:`pes.policies.Policy`, acting deterministically:
     ``actor.mean_action(obs (E, N, N, 8), mask (E, N, N))`` gives the (E, N, 2) actions."""
@@ -66,26 +60,6 @@ class ActorPolicy(nn.Module):
 
     def reset(self, mask: Tensor | None = None) -> None:
         """Stateless between steps."""
-
-
-class StochasticActorLearner:
-    """What PPO and MAAC share as learners: one stochastic actor, ``Actor(cfg, num_pursuers)``
-    with a ``mean_action``, on the pursuers' flat observations, so a trained policy serves only
-    the swarm size it was trained for."""
-
-    Actor: type[nn.Module]
-
-    @staticmethod
-    def fixed_swarm(cfg) -> str | None:
-        """Why a trained policy only serves the swarm size it was trained on
-        (:func:`pes.algos.policy.load_pursuer_policy` checks it)."""
-        return "has MLPs whose inputs are sized"
-
-    @classmethod
-    def build_policy(cls, cfg, env_cfg, device) -> tuple[ActorPolicy, dict[str, nn.Module]]:
-        """An untrained policy of this architecture, and its modules by name (to load into)."""
-        actor = cls.Actor(cfg, env_cfg.num_pursuers).to(device)
-        return ActorPolicy(actor), {"actor": actor}
 
 
 def gaussian_log_prob(x: Tensor, mean: Tensor, log_std: Tensor) -> Tensor:

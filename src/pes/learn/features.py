@@ -48,11 +48,6 @@ def frames(state: Tensor) -> Tensor:
     return state[..., :4]
 
 
-def evader_position(state: Tensor) -> Tensor:
-    """(..., 2) the evader's normalised position."""
-    return state[..., -1, :2]
-
-
 def relative_prediction(pred: Tensor, state: Tensor, num_pursuers: int) -> Tensor:
     """TP Net's predicted evader positions as seen from each pursuer.
 
