@@ -171,7 +171,8 @@ def table4(
             _paper(paper_of[c][key], scale, digits, unit) if c in paper_of else "—" for c in columns
         ]
         lines.append(f"| {label} (PES) | " + " | ".join(ours) + " |")
-        lines.append(f"| {label} (paper) | " + " | ".join(paper) + " |")
+        if not meta.get("scenario"):  # the paper's numbers are of its task, not of another
+            lines.append(f"| {label} (paper) | " + " | ".join(paper) + " |")
     failures = (
         ("failed: swarm lost to crashes (PES)", "lost_rate", 100.0, 1, " %"),
         ("failed: step limit (PES)", "timeout_rate", 100.0, 1, " %"),
