@@ -652,6 +652,7 @@ class PPO(Learner):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         if self.demos is not None and "demos" in state:
-            self.demo.load_state_dict(state["demo"])
+            if "demo" in state:  # a checkpoint older than this record: the controllers start afresh
+                self.demo.load_state_dict(state["demo"])
             self.demos.load_state_dict(state["demos"])
             self.bc_pending = state["bc_pending"]
