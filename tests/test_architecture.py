@@ -140,8 +140,12 @@ def test_every_learner_reads_every_key_of_its_config(algo):
     assert not unread, f"{algo} never reads {sorted(unread)}"
 
 
+COMPARED = (*TABLE4_ALGOS, "mappo")
+"""The learners of Table IV and MAPPO, the reference learner beside them."""
+
+
 @pytest.mark.parametrize("protocol", ["pes", "paper"])
-@pytest.mark.parametrize("algo", TABLE4_ALGOS)
+@pytest.mark.parametrize("algo", COMPARED)
 def test_every_table4_learner_trains_under_both_protocols(algo, protocol, tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["train", "--algo", algo, "--preset", "tiny", "--protocol", protocol, "--json"]
@@ -158,7 +162,7 @@ def test_the_quick_presets_of_table4_share_one_protocol_and_one_run():
     """Table IV compares methods: every learner's quick preset trains under the same protocol,
     against the same opponent, on the same budget of experience (env steps, which no episode,
     time or CPU limit cuts short)."""
-    configs = [build_train_config(algo, "quick") for algo in TABLE4_ALGOS]
+    configs = [build_train_config(algo, "quick") for algo in COMPARED]
     for cfg in configs:
         assert cfg.protocol == PES and cfg.protocol.name == "pes"
         assert cfg.env == configs[0].env and cfg.env_config() == configs[0].env_config()
