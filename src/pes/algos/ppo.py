@@ -387,19 +387,19 @@ class PPO(Learner):
         return ActorPolicy(actor), {"actor": actor}
 
     # --- acting ----------------------------------------------------------------------------------
-    def _value(self, state: Tensor, alive: Tensor) -> Tensor:
-        """The value network's output for every pursuer (standardised with ``value_norm``):
-        state (B, A, 8), alive (B, N) -> (B, N)."""
-        obs, mask = pursuer_obs(state, alive)
+    def values(
+        self, state: Tensor, alive: Tensor, obs: Tensor | None = None, mask: Tensor | None = None
+    ) -> Tensor:
+        """V for every pursuer, in reward units: state (B, A, 8), alive (B, N) -> (B, N); the
+        pursuers' observations (B, N, N, 8) and row masks (B, N, N) are rebuilt from the state
+        unless given."""
+        if obs is None:
+            obs, mask = pursuer_obs(state, alive)
         shared_state = state.unsqueeze(1).expand(-1, self.n, -1, -1)
-        return self.value(obs, mask, shared_state).squeeze(-1)
-
-    def values(self, state: Tensor, alive: Tensor) -> Tensor:
-        """V for every pursuer, in reward units: state (B, A, 8), alive (B, N) -> (B, N)."""
-        v = self._value(state, alive)
-        return (
-            self.return_norm.denormalise(v.unsqueeze(-1)).squeeze(-1) if self.lc.value_norm else v
-        )
+        v = self.value(obs, mask, shared_state).squeeze(-1)
+        if self.lc.value_norm:
+            v = self.return_norm.denormalise(v.unsqueeze(-1)).squeeze(-1)
+        return v
 
     def demonstrating(self) -> bool:
         """Whether the demonstrator plays the next step (the protocol's ``demonstrations``)."""
@@ -417,7 +417,7 @@ class PPO(Learner):
         self._acting = {
             "action": sample,
             "logp": gaussian_log_prob(sample, mean, log_std),
-            "value": self.values(info["state"], info["obs_mask"][:, :, 0]),
+            "value": self.values(info["state"], info["obs_mask"][:, :, 0], obs, info["obs_mask"]),
         }
         return sample.clamp(-1.0, 1.0), None
 
