@@ -49,6 +49,16 @@ def _read(handle) -> dict | None:
     return record if isinstance(record, dict) else None
 
 
+def _in_use(folder: Path, handle, prefix: str = "") -> FolderInUseError:
+    """The one-line error for ``folder``, whose lock file ``handle`` another process holds."""
+    holder = _read(handle)
+    who = _holder_text(holder) if holder else "another process"
+    return FolderInUseError(
+        f"{prefix}'{folder}' is in use by {who}; wait for it to finish, stop it, or choose "
+        "another --out"
+    )
+
+
 class FolderLock:
     """The lock on ``folder`` (created if missing): :meth:`acquire` takes it or raises
     :class:`FolderInUseError`; :meth:`release` lets it go. Locks are per open file, so two
@@ -73,13 +83,9 @@ class FolderLock:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:
-            holder = _read(handle)
+            error = _in_use(self.folder, handle)
             handle.close()
-            who = _holder_text(holder) if holder else "another process"
-            raise FolderInUseError(
-                f"'{self.folder}' is in use by {who}; wait for it to finish, stop it, or "
-                "choose another --out"
-            ) from None
+            raise error from None
         previous = _read(handle)
         if previous is not None:
             print(
@@ -126,10 +132,5 @@ def check_free(folders: list[Path], what: str) -> None:
                 try:
                     fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 except BlockingIOError:
-                    holder = _read(handle)
-                    who = _holder_text(holder) if holder else "another process"
-                    raise FolderInUseError(
-                        f"{what}: '{folder}' is in use by {who}; wait for it to finish, stop "
-                        "it, or choose another --out"
-                    ) from None
+                    raise _in_use(folder, handle, f"{what}: ") from None
                 fcntl.flock(handle, fcntl.LOCK_UN)
