@@ -16,12 +16,24 @@ warm-up that fills the replay buffer (or one rollout):
   transitions for the on-policy ones): 1 / (1 / collect + updates_per_env_step * update_s);
 * ``bytes_per_transition`` of the replay buffer and what 1e6 transitions take;
 * ``update_time_by_op``: the share of an update's time taken by its five costliest operators.
+
+With ``--baseline REF`` each measurement runs twice in turn, in fresh processes: once on the
+code of git revision REF (checked out into a temporary worktree) and once on this tree, so that
+both see the same machine and the same load; the output gains ``baseline`` rows and, per
+learner, ``speedup``: the ratio of the training env-steps/s and of the update times.
+
+    python benchmarks/bench_train.py --threads 1 --baseline c14c6ee \
+        --out benchmarks/results/train_cpu_speedup.json
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -148,20 +160,52 @@ def profile_update(learner, gen: torch.Generator, device: str, fill, updates: in
     return {k: round(v / total, 3) for k, v in totals.most_common(5)}
 
 
+def measure_in(src: Path, algo: str, preset: str, args: argparse.Namespace) -> dict:
+    """:func:`measure` in a fresh process that imports ``pes`` from ``src``."""
+    cmd = [sys.executable, __file__, "--row", algo, preset, "--device", args.device]
+    cmd += ["--seconds", str(args.seconds), "--threads", str(args.threads)]
+    env = dict(os.environ, PYTHONPATH=str(src))
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"bench_train: {algo} {preset} failed under {src}: {done.stderr.strip()[-500:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def worktree(ref: str, into: str) -> Path:
+    """The ``src`` folder of git revision ``ref`` checked out under ``into``."""
+    root = Path(__file__).resolve().parents[1]
+    path = Path(into) / "baseline"
+    done = subprocess.run(
+        ["git", "-C", str(root), "worktree", "add", "--detach", str(path), ref],
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode != 0:
+        sys.exit(f"bench_train: cannot check out {ref}: {done.stderr.strip()}")
+    return path / "src"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--algos", nargs="+", default=list(ALGOS), choices=list(ALGOS))
     parser.add_argument(
-        "--presets", nargs="+", default=["quick"], choices=["quick", "paper", "tiny"]
+        "--presets", nargs="+", default=["quick"], choices=["quick", "gpu", "paper", "tiny"]
     )
     parser.add_argument("--seconds", type=float, default=10.0, help="per measurement")
     parser.add_argument("--threads", type=int, default=0)
+    parser.add_argument(
+        "--baseline", default=None, help="a git revision to measure beside this tree, in turn"
+    )
+    parser.add_argument("--row", nargs=2, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
     resolve_device(args.device)  # a clear error for a device this machine lacks
     if args.threads:
         torch.set_num_threads(args.threads)
+    if args.row:  # one measurement for a parent run with --baseline
+        print(json.dumps(measure(*args.row, args.device, args.seconds)), flush=True)
+        return
     out = Path(args.out or f"benchmarks/results/train_{args.device}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     result = {
@@ -171,16 +215,46 @@ def main() -> None:
         + " ".join(
             f"--{k.replace('_', '-')} {' '.join(v) if isinstance(v, list) else v}"
             for k, v in vars(args).items()
-            if v is not None and k != "out"
+            if v is not None and k not in ("out", "row")
         ),
     }
-    for algo in args.algos:
-        for preset in args.presets:
-            row = measure(algo, preset, args.device, args.seconds)
-            print(json.dumps(row), flush=True)
-            result["results"].append(row)
-            # written after every row, so that a run stopped early keeps what it measured
-            out.write_text(json.dumps(result, indent=2) + "\n")
+    with tempfile.TemporaryDirectory() as tmp:
+        base = worktree(args.baseline, tmp) if args.baseline else None
+        here = Path(__file__).resolve().parents[1] / "src"
+        try:
+            for algo in args.algos:
+                for preset in args.presets:
+                    if base is None:
+                        rows = [measure(algo, preset, args.device, args.seconds)]
+                    else:
+                        old = measure_in(base, algo, preset, args) | {"code": args.baseline}
+                        new = measure_in(here, algo, preset, args) | {"code": "this tree"}
+                        rows = [old, new]
+                        result.setdefault("speedup", []).append(speedup(old, new))
+                        print(json.dumps(result["speedup"][-1]), flush=True)
+                    for row in rows:
+                        print(json.dumps(row), flush=True)
+                    result["results"] += rows
+                    # written after every row, so that a run stopped early keeps what it measured
+                    out.write_text(json.dumps(result, indent=2) + "\n")
+        finally:
+            if base is not None:
+                subprocess.run(["git", "worktree", "remove", "--force", str(base.parent)])
+
+
+def speedup(old: dict, new: dict) -> dict:
+    """How much faster ``new`` trains than ``old``: ratios of env-steps/s and update times."""
+    return {
+        "algo": new["algo"],
+        "preset": new["preset"],
+        "train_env_steps_per_s": round(
+            new["train_env_steps_per_s"] / old["train_env_steps_per_s"], 3
+        ),
+        "collect_env_steps_per_s": round(
+            new["collect_env_steps_per_s"] / old["collect_env_steps_per_s"], 3
+        ),
+        "update_time": round(old["update_ms"] / new["update_ms"], 3),
+    }
 
 
 if __name__ == "__main__":

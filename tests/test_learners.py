@@ -16,7 +16,7 @@ import pytest
 import torch
 
 import pes
-from pes.algos import build_train_config, train
+from pes.algos import ALGOS, build_train_config, train
 from pes.algos.cbc_tp import CBCTP, CBCActor, CBCCritic, TPNet
 from pes.algos.evader_ddpg import EvaderDDPG
 from pes.algos.policy import load_pursuer_policy
@@ -655,3 +655,32 @@ def test_cpu_limit_stops_a_run_by_its_cpu_time_and_resumes_with_it(tmp_path):
     resumed = train(longer, tmp_path / "run", resume=True, progress=False)
     assert resumed["stopped_by"] == "cpu_limit" and resumed["episodes"] > summary["episodes"]
     assert 120 * limit <= resumed["cpu_s"] < 120 * limit + 30
+
+
+@pytest.mark.parametrize("algo", sorted(ALGOS))
+def test_the_gpu_preset_keeps_the_quick_settings_and_runs_on_a_cpu(algo, tmp_path):
+    """Every learner's ``gpu`` preset: its quick preset's learning settings, thousands of
+    environments on ``cuda``, a replay learner's update ratio unchanged (each env step replayed
+    as often), ten times the budget; and it trains on a CPU at tiny sizes."""
+    quick, gpu = (build_train_config(algo, preset) for preset in ("quick", "gpu"))
+    assert gpu.device == "cuda" and gpu.num_envs >= 1024
+    assert gpu.env_steps == 10 * quick.env_steps and gpu.episodes >= quick.episodes
+    q, g = quick.learner, gpu.learner
+    for key in ("gamma", "lr_actor", "lr_critic", "hidden", "mlp_hidden", "tau", "ppo_epochs"):
+        assert getattr(g, key, None) == getattr(q, key, None), key
+    if ALGOS[algo].on_policy:
+        assert g.rollout_steps * gpu.num_envs >= 100_000
+    else:
+        assert g.batch_size / g.update_every == q.batch_size / q.update_every
+    sizes = dict(device="cpu", num_envs=8, episodes=3, env_steps=0, eval_episodes=2)
+    sizes |= {"compile_env": False, "tensorboard": False, "env.max_steps": 60}
+    if ALGOS[algo].on_policy:
+        sizes |= dict(rollout_steps=16, batch_size=32)
+    else:
+        sizes |= dict(batch_size=32, warmup=200, buffer_size=2000, update_every=8)
+    if algo == "cbc-tp":
+        sizes |= dict(tp_batch_size=32)
+    if "demonstrations" in build_train_config(algo, "gpu").protocol.active():
+        sizes["protocol.demonstrations.transitions"] = 200
+    summary = train(build_train_config(algo, "gpu", sizes), tmp_path / algo, progress=False)
+    assert summary["episodes"] >= 3 and summary["updates"] > 0

@@ -671,9 +671,10 @@ def _add_train(sub) -> None:
     p.add_argument(
         "--preset",
         default="quick",
-        choices=["quick", "paper", "tiny"],
-        help="budget preset: quick (laptop CPU, default), paper (the paper's settings), tiny "
-        "(tests)",
+        choices=["quick", "gpu", "paper", "tiny"],
+        help="budget preset: quick (laptop CPU, default), gpu (the quick settings at a GPU's "
+        "sizes: thousands of environments, large batches, 10x the budget; --set device=cpu runs "
+        "it on a CPU), paper (the paper's settings), tiny (tests)",
     )
     p.add_argument(
         "--protocol",
@@ -864,9 +865,9 @@ def _add_tune(sub) -> None:
     p.add_argument("--protocol", choices=["pes", "paper"], default="pes", help="training protocol")
     p.add_argument(
         "--preset",
-        choices=["quick", "paper", "tiny"],
+        choices=["quick", "gpu", "paper", "tiny"],
         default="quick",
-        help="what each trial trains (default: quick; tiny: a seconds-long check)",
+        help="what each trial trains (default: quick; gpu: on a GPU; tiny: a seconds-long check)",
     )
     p.add_argument("--trials", type=_positive, default=8, help="trials (default: 8)")
     p.add_argument(

@@ -28,7 +28,7 @@ from torch import Tensor, nn
 from pes.algos.cbc_tp import CBCCritic
 from pes.learn.actor_critic import ActorCritic, ActorCriticConfig
 from pes.learn.nets import RowScaled, mlp
-from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN, gpu_preset
 
 
 @dataclass
@@ -74,6 +74,7 @@ BICNET_PRESETS: dict[str, dict[str, Any]] = {
         protocol=TINY_PROTOCOL,
     ),
 }
+BICNET_PRESETS["gpu"] = gpu_preset(BICNET_PRESETS["quick"])
 
 
 class BiCNetActor(RowScaled):

@@ -38,11 +38,11 @@ from torch import Tensor, nn
 
 from pes.errors import ConfigError
 from pes.learn.actor_critic import ActorCritic, ActorCriticConfig, DeterministicPolicy
-from pes.learn.common import masked_mean, optimise
+from pes.learn.common import adam, masked_mean, optimise
 from pes.learn.config import TrainConfig
 from pes.learn.features import frames, pursuer_obs, relative_prediction
 from pes.learn.nets import RowScaled, mlp
-from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN, gpu_preset
 from pes.learn.td import TDWindows
 from pes.sim.config import EnvConfig
 
@@ -135,6 +135,7 @@ CBC_PRESETS: dict[str, dict[str, Any]] = {
     "quick": {**QUICK_RUN, **QUICK_LEARNER, **CBC_TUNED},
     "tiny": {**TINY_RUN, **TINY_LEARNER, "protocol": TINY_PROTOCOL},
 }
+CBC_PRESETS["gpu"] = gpu_preset(CBC_PRESETS["quick"])
 """CBC Net's presets: ``quick`` trains the shared quick budget (2,000,000 env steps)."""
 
 TP_QUICK = dict(tp_hidden=64, lr_tp=1e-3, tp_batch_size=256, tp_update_every=4)
@@ -147,6 +148,7 @@ CBC_TP_PRESETS: dict[str, dict[str, Any]] = {
     "quick": {**CBC_PRESETS["quick"], **TP_QUICK, **CBC_TP_TUNED},
     "tiny": {**CBC_PRESETS["tiny"], "tp_hidden": 32, "tp_batch_size": 64},
 }
+CBC_TP_PRESETS["gpu"] = gpu_preset(CBC_TP_PRESETS["quick"])
 """CBC-TP Net's presets: CBC Net's, with TP Net's settings."""
 
 
@@ -411,7 +413,7 @@ class CBCTP(CBCNet):
     def __init__(self, cfg: TrainConfig, env_cfg: EnvConfig, device: torch.device) -> None:
         lc = cfg.learner
         self.tp = TPNet(lc.tp_hidden, lc.tp_layers, lc.horizon).to(device)
-        self.opt_tp = torch.optim.Adam(self.tp.parameters(), lr=lc.lr_tp)
+        self.opt_tp = adam(self.tp.parameters(), lc.lr_tp)
         self.history = env_cfg.history_length
         super().__init__(cfg, env_cfg, device)
 

@@ -19,12 +19,12 @@ from torch import Tensor, nn
 
 from pes.errors import ConfigError
 from pes.learn.buffer import ReplayBuffer
-from pes.learn.common import optimise, soft_update, target_copy
+from pes.learn.common import adam, optimise, soft_update, target_copy
 from pes.learn.config import OffPolicyConfig, TrainConfig
 from pes.learn.learner import Learner
 from pes.learn.nets import mlp
 from pes.learn.noise import OUNoise
-from pes.learn.presets import TINY_PROTOCOL, TINY_RUN
+from pes.learn.presets import TINY_PROTOCOL, TINY_RUN, gpu_preset
 from pes.policies import SCRIPTED
 from pes.sim.config import EnvConfig
 
@@ -78,6 +78,7 @@ EVADER_PRESETS: dict[str, dict[str, Any]] = {
         protocol=TINY_PROTOCOL,
     ),
 }
+EVADER_PRESETS["gpu"] = gpu_preset(EVADER_PRESETS["quick"])
 """The evader's presets; it trains under the ``paper`` protocol by default."""
 
 
@@ -135,8 +136,8 @@ class EvaderDDPG(Learner):
         self.critic = DeepSetCritic(lc.hidden).to(device)
         self.actor_target = target_copy(self.actor)
         self.critic_target = target_copy(self.critic)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=lc.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=lc.lr_critic)
+        self.opt_actor = adam(self.actor.parameters(), lc.lr_actor)
+        self.opt_critic = adam(self.critic.parameters(), lc.lr_critic)
         self.pursuers = SCRIPTED[lc.opponent](env_cfg)
         self.buffer = ReplayBuffer(
             lc.buffer_size,

@@ -34,7 +34,7 @@ from torch import Tensor, nn
 from pes.learn.actor_critic import ActorCritic, ActorCriticConfig
 from pes.learn.config import TrainConfig
 from pes.learn.nets import EnsembleMLP, RowScaled, observation_input
-from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN, gpu_preset
 from pes.learn.td import TDWindows
 
 
@@ -84,6 +84,7 @@ MADDPG_PRESETS: dict[str, dict[str, Any]] = {
         protocol=TINY_PROTOCOL,
     ),
 }
+MADDPG_PRESETS["gpu"] = gpu_preset(MADDPG_PRESETS["quick"])
 """MADDPG's presets."""
 
 DDPG_TUNED: dict[str, Any] = dict(
@@ -96,6 +97,7 @@ DDPG_PRESETS: dict[str, dict[str, Any]] = {
     **MADDPG_PRESETS,
     "quick": {**MLP_QUICK, **DDPG_TUNED},
 }
+DDPG_PRESETS["gpu"] = gpu_preset(DDPG_PRESETS["quick"])
 """DDPG's presets: MADDPG's, with the quick one of DDPG's own search."""
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 from pes.algos.ppo import PPO, STANDARD, PPOConfig
-from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN, gpu_preset
 
 MAPPO_DEFAULTS: dict[str, Any] = dict(
     central_value=True,
@@ -51,6 +51,7 @@ MAPPO_PRESETS: dict[str, dict[str, Any]] = {
     )
     | STANDARD,
 }
+MAPPO_PRESETS["gpu"] = gpu_preset(MAPPO_PRESETS["quick"])
 
 
 class MAPPO(PPO):

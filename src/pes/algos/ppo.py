@@ -50,12 +50,12 @@ from torch import Tensor, nn
 
 from pes.errors import ConfigError
 from pes.learn.buffer import RolloutBuffer, gae
-from pes.learn.common import ActorPolicy, gaussian_log_prob, masked_mean, optimise
+from pes.learn.common import ActorPolicy, adam, gaussian_log_prob, masked_mean, optimise
 from pes.learn.config import LearnerConfig, TrainConfig
 from pes.learn.features import pursuer_obs
 from pes.learn.learner import Learner
-from pes.learn.nets import PerAgent, RowScaled
-from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN
+from pes.learn.nets import PerAgent, RowScaled, Tanh
+from pes.learn.presets import QUICK_RUN, TINY_PROTOCOL, TINY_RUN, gpu_preset
 from pes.learn.td import exit_charge
 from pes.policies import SCRIPTED
 from pes.sim.config import EnvConfig
@@ -173,6 +173,7 @@ PPO_PRESETS: dict[str, dict[str, Any]] = {
     )
     | STANDARD,
 }
+PPO_PRESETS["gpu"] = gpu_preset(PPO_PRESETS["quick"])
 
 
 class RunningNorm(nn.Module):
@@ -229,7 +230,7 @@ def orthogonal_mlp(sizes: list[int], out_gain: float) -> nn.Sequential:
         nn.init.zeros_(layer.bias)
         layers.append(layer)
         if not last:
-            layers.append(nn.Tanh())
+            layers.append(Tanh())
     return nn.Sequential(*layers)
 
 
@@ -348,8 +349,8 @@ class PPO(Learner):
         self.return_norm = RunningNorm(1).to(device)
         self.huber_delta = lc.huber_delta
         self.policy = ActorPolicy(self.actor)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=lc.lr_actor, eps=1e-5)
-        self.opt_critic = torch.optim.Adam(self.value.parameters(), lr=lc.lr_critic, eps=1e-5)
+        self.opt_actor = adam(self.actor.parameters(), lc.lr_actor, eps=1e-5)
+        self.opt_critic = adam(self.value.parameters(), lc.lr_critic, eps=1e-5)
         fields = {
             "state": ((n + 1, 8), torch.float32),
             "alive": ((n,), torch.bool),

@@ -29,7 +29,7 @@ import torch
 from torch import Tensor, nn
 
 from pes.learn.buffer import ReplayBuffer, transition, transition_fields
-from pes.learn.common import masked_mean, optimise, soft_update, target_copy
+from pes.learn.common import adam, masked_mean, optimise, soft_update, target_copy
 from pes.learn.config import OffPolicyConfig, TrainConfig
 from pes.learn.features import pursuer_obs
 from pes.learn.learner import Learner
@@ -118,8 +118,8 @@ class ActorCritic(Learner):
         self.critic = self.make_critic(lc, n).to(device)
         self.actor_target = target_copy(self.actor)
         self.critic_target = target_copy(self.critic)
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=lc.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=lc.lr_critic)
+        self.opt_actor = adam(self.actor.parameters(), lc.lr_actor)
+        self.opt_critic = adam(self.critic.parameters(), lc.lr_critic)
         self.policy = self.make_policy()
         fields = transition_fields(n) | self.extra_fields()
         demos = protocol.demonstrations

@@ -100,7 +100,8 @@ class TrainConfig:
     """Method (see ``pes train --help``)."""
     preset: str = "quick"
     """Budget preset applied under the user's settings: ``paper`` (the paper's settings),
-    ``quick`` (2,000,000 env steps: one to two hours of one CPU thread) or ``tiny`` (tests)."""
+    ``quick`` (2,000,000 env steps: one to two hours of one CPU thread), ``gpu`` (the quick
+    settings at a GPU's sizes, 20,000,000 env steps) or ``tiny`` (tests)."""
     protocol: Protocol = field(default_factory=Protocol)
     """The training protocol (:mod:`pes.learn.protocol`): ``paper`` or ``pes`` and its aids."""
     learner: Any = None
@@ -208,9 +209,12 @@ def build_train_config(
     name = protocol or name or ("paper" if preset == "paper" else "pes")
     learner_keys = [f.name for f in dataclasses.fields(learner_config)]
     preset_values = dict(presets[preset])
-    # a preset scales the aids the protocol has; it turns none on
+    # a preset scales the aids the protocol has; it turns none on, but may give the exploration
+    # noise (always there) a schedule of its own, as the DDPG evader's
     scaling = preset_values.pop("protocol", {})
     active = PROTOCOLS[name].active() if name in PROTOCOLS else []
+    if {"sigma", "sigma_final"} & set(scaling.get("noise", {})):
+        active = [*active, "noise"]
     preset_values["protocol"] = {k: v for k, v in scaling.items() if k in active}
     layers = [
         split_values(preset_values, learner_keys, algo),

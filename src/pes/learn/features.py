@@ -34,11 +34,14 @@ def pursuer_obs(state: Tensor, alive: Tensor) -> tuple[Tensor, Tensor]:
     n = alive.shape[-1]
     idx = other_index(n, state.device)
     rows = state[..., :n, :]
-    picked = rows[..., idx, :]  # (..., N, N, 8)
-    relative = torch.cat([rows[..., :4], torch.zeros_like(rows[..., 4:])], dim=-1)
-    is_self = (torch.arange(n, device=state.device) == 0)[:, None]
-    obs = picked - torch.where(is_self, 0.0, relative.unsqueeze(-2))
-    mask = alive[..., idx] & alive.unsqueeze(-1)
+    picked = rows.index_select(-2, idx.flatten()).unflatten(-2, (n, n))  # (..., N, N, 8)
+    # the others' rows relative to the pursuer's own position and velocity (columns 0-3);
+    # its own row (k = 0) and the obstacle and evader vectors (columns 4-7) stay as they are
+    offset = torch.ones(n, 8, dtype=state.dtype, device=state.device)
+    offset[0] = 0.0
+    offset[:, 4:] = 0.0
+    obs = picked - rows.unsqueeze(-2) * offset
+    mask = alive.index_select(-1, idx.flatten()).unflatten(-1, (n, n)) & alive.unsqueeze(-1)
     return obs * mask.unsqueeze(-1), mask
 
 
