@@ -19,8 +19,9 @@ warm-up that fills the replay buffer (or one rollout):
 
 With ``--baseline REF`` each measurement runs twice in turn, in fresh processes: once on the
 code of git revision REF (checked out into a temporary worktree) and once on this tree, so that
-both see the same machine and the same load; the output gains ``baseline`` rows and, per
-learner, ``speedup``: the ratio of the training env-steps/s and of the update times.
+both see the same machine and the same load, ``--repeats`` times (default 3); the output
+gains the baseline's rows and, per learner, ``speedup``: the ratios of the medians of the
+training env-steps/s and of the update times.
 
     python benchmarks/bench_train.py --threads 1 --baseline c14c6ee \
         --out benchmarks/results/train_cpu_speedup.json
@@ -31,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -197,6 +199,9 @@ def main() -> None:
     parser.add_argument(
         "--baseline", default=None, help="a git revision to measure beside this tree, in turn"
     )
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="with --baseline: measurements of each, in turn"
+    )
     parser.add_argument("--row", nargs=2, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
@@ -226,11 +231,14 @@ def main() -> None:
                 for preset in args.presets:
                     if base is None:
                         rows = [measure(algo, preset, args.device, args.seconds)]
-                    else:
-                        old = measure_in(base, algo, preset, args) | {"code": args.baseline}
-                        new = measure_in(here, algo, preset, args) | {"code": "this tree"}
-                        rows = [old, new]
-                        result.setdefault("speedup", []).append(speedup(old, new))
+                    else:  # in turn, so that both see the same load
+                        rows, olds, news = [], [], []
+                        for _ in range(args.repeats):
+                            olds.append(measure_in(base, algo, preset, args))
+                            news.append(measure_in(here, algo, preset, args))
+                            rows += [olds[-1] | {"code": args.baseline}]
+                            rows += [news[-1] | {"code": "this tree"}]
+                        result.setdefault("speedup", []).append(speedup(olds, news))
                         print(json.dumps(result["speedup"][-1]), flush=True)
                     for row in rows:
                         print(json.dumps(row), flush=True)
@@ -242,18 +250,26 @@ def main() -> None:
                 subprocess.run(["git", "worktree", "remove", "--force", str(base.parent)])
 
 
-def speedup(old: dict, new: dict) -> dict:
-    """How much faster ``new`` trains than ``old``: ratios of env-steps/s and update times."""
+def speedup(old: list[dict], new: list[dict]) -> dict:
+    """How much faster ``new`` trains than ``old`` (measurements of each, taken in turn): the
+    ratios of their medians of training and collecting env-steps/s and of update time."""
+
+    def median(rows: list[dict], key: str) -> float:
+        return statistics.median(row[key] for row in rows)
+
     return {
-        "algo": new["algo"],
-        "preset": new["preset"],
+        "algo": new[0]["algo"],
+        "preset": new[0]["preset"],
+        "repeats": len(new),
         "train_env_steps_per_s": round(
-            new["train_env_steps_per_s"] / old["train_env_steps_per_s"], 3
+            median(new, "train_env_steps_per_s") / median(old, "train_env_steps_per_s"), 3
         ),
         "collect_env_steps_per_s": round(
-            new["collect_env_steps_per_s"] / old["collect_env_steps_per_s"], 3
+            median(new, "collect_env_steps_per_s") / median(old, "collect_env_steps_per_s"), 3
         ),
-        "update_time": round(old["update_ms"] / new["update_ms"], 3),
+        "update_time": round(median(old, "update_ms") / median(new, "update_ms"), 3),
+        "baseline_train_env_steps_per_s": median(old, "train_env_steps_per_s"),
+        "train_env_steps_per_s_now": median(new, "train_env_steps_per_s"),
     }
 
 

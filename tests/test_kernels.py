@@ -17,7 +17,8 @@ from pes.sim.config import EnvConfig
 
 @pytest.fixture
 def torch_loop(monkeypatch):
-    """A switch between the two paths: ``use(True)`` the kernel, ``use(False)`` torch."""
+    """A switch between the two paths for the environments made next: ``use(True)`` the
+    kernel, ``use(False)`` torch."""
 
     def use(kernel: bool) -> None:
         monkeypatch.setattr(kernels, "_ENABLED", kernel)
@@ -26,23 +27,26 @@ def torch_loop(monkeypatch):
 
 
 def test_kernel_is_used_on_the_cpu():
-    assert kernels.available(torch.zeros(2))
-    assert not kernels.available(torch.zeros(2, dtype=torch.float64))
-    assert not kernels.available(torch.zeros(2, requires_grad=True))
+    assert kernels.usable(torch.device("cpu")) and not kernels.usable(torch.device("meta"))
+    assert pes.make_env(num_envs=2, seed=0).scenario.kernels
+    assert kernels.applies(torch.zeros(2))
+    assert not kernels.applies(torch.zeros(2, dtype=torch.float64))
+    assert not kernels.applies(torch.zeros(2, requires_grad=True))
 
 
 FIRST_RUN = """
-import time, torch, pes
+import torch, pes
 from pes.sim import kernels
 env = pes.make_env(num_envs=2, seed=0)
 env.reset()
 env.step(torch.zeros(2, 5, 2))
-print("torch first:", not kernels.serving(), kernels._child is not None)
+print("torch first:", not env.scenario.kernels, kernels._child is not None)
 kernels._child.wait()  # the background compilation
-deadline = time.monotonic() + 60  # the steps look at it every half second
-while not kernels.serving() and time.monotonic() < deadline:
-    env.step(torch.zeros(2, 5, 2))
-print("switched:", kernels.serving(), kernels.ready_marker().is_file())
+env.step(torch.zeros(2, 5, 2))
+later = pes.make_env(num_envs=2, seed=0)
+later.reset()
+later.step(torch.zeros(2, 5, 2))
+print("kept:", not env.scenario.kernels, later.scenario.kernels, kernels.ready_marker().is_file())
 """
 
 LATER_RUN = """
@@ -58,9 +62,10 @@ print("kernels first:", kernels.serving(), hits > 0)
 @pytest.mark.slow
 def test_a_machine_without_compiled_kernels_steps_at_once_and_compiles_them_aside(tmp_path):
     """With no compiled kernels (an empty Numba cache, as on a new machine) the first step does
-    not wait for a compilation: it runs the torch code while a background process compiles the
-    kernels, and the steps switch to them when it is done; the next process loads them from
-    the cache before its first step."""
+    not wait for a compilation: its environment runs the torch code while a background process
+    compiles the kernels, and keeps it (a run never switches paths); an environment made once
+    the compilation is done uses them; the next process loads them from the cache before its
+    first step."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
 
     def run(script: str) -> str:
@@ -72,7 +77,7 @@ def test_a_machine_without_compiled_kernels_steps_at_once_and_compiles_them_asid
 
     assert not list(tmp_path.glob("pes-kernels-*.ready"))
     assert "torch first: True True" in (first := run(FIRST_RUN)), first
-    assert "switched: True True" in first
+    assert "kept: True True True" in first
     assert len(list(tmp_path.glob("pes-kernels-*.ready"))) == 1
     assert "kernels first: True True" in run(LATER_RUN)
 
@@ -127,20 +132,19 @@ def test_kernels_step_as_torch(config, torch_loop):
     """From the same states and actions the two paths give the same flags, counters and
     resets, and the same numbers to float32 rounding (torch's vectorised square root is not
     always correctly rounded; the kernels' is): observations, rewards, info and next state."""
-    env = pes.make_env(config, num_envs=37, seed=5)
-    env.reset(seed=5)
+    torch_loop(True)
+    fast = pes.make_env(config, num_envs=37, seed=5)
+    torch_loop(False)
+    slow = pes.make_env(config, num_envs=37, seed=5)
+    assert fast.scenario.kernels and not slow.scenario.kernels
+    fast.reset(seed=5)
     generator = torch.Generator().manual_seed(0)
     for _ in range(70):
         actions = torch.rand(37, config.num_pursuers, 2, generator=generator) * 2 - 1
-        start = {k: v.clone() for k, v in env.get_state().items()}
-        torch_loop(True)
-        by_kernel = env.step(actions)
-        kernel_state = env.get_state()
-        env.set_state(start)
-        torch_loop(False)
-        by_torch = env.step(actions)
-        _assert_same_step(by_kernel, kernel_state, by_torch, env.get_state())
-        env.set_state(kernel_state)
+        slow.set_state(fast.get_state())
+        by_kernel = fast.step(actions)
+        by_torch = slow.step(actions)
+        _assert_same_step(by_kernel, fast.get_state(), by_torch, slow.get_state())
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
@@ -172,7 +176,7 @@ def test_torch_loop_still_serves_float64_and_gradients(torch_loop):
     fields = [torch.zeros(1, 6, requires_grad=(i == 0)) for i in range(16)]
     v = Vehicles(*fields)
     ax = torch.full((1, 6), 1.0)
-    out = quadrotor_step(v, ax, ax * 0, ax * 0, ax * 0, sc.params, 0.1, 10)
+    out = quadrotor_step(v, ax, ax * 0, ax * 0, ax * 0, sc.params, 0.1, 10, use_kernels=True)
     assert out.x.requires_grad and out.vx[0, 0] > 0
     assert GRAVITY > 0
 

@@ -12,7 +12,7 @@ import pes
 from pes.errors import ConfigError
 from pes.sim.dynamics import Vehicles, attitude_gains, quadrotor_step
 from pes.sim.geometry import build_roadmap, geodesic_distance, nearest_obstacle, ray_distance
-from pes.sim.scenario import softplus_obstacle_term
+from pes.sim.reward import softplus_obstacle_term
 from tests.conftest import set_vehicles
 
 

@@ -1,6 +1,7 @@
 """The Numba kernels of :mod:`pes.sim.kernels` for the rest of the step (imported on first use
-only): the ``flee`` evader, the collisions, capture, rewards and history of
-:func:`pes.sim.scenario.advance`, and :func:`pes.sim.scenario.observe`.
+only): the ``flee`` evader, the collisions, capture and history of
+:func:`pes.sim.scenario.advance`, and :func:`pes.sim.scenario.observe`. The rewards are
+:mod:`pes.sim.reward`'s, in torch, on both paths.
 
 Each function walks the environments once and repeats the torch code's float32 arithmetic
 operation by operation: every constant arrives as a float32 argument (torch rounds a Python
@@ -22,9 +23,8 @@ from pes.sim import _numba_substeps as ss
 _ZERO, _ONE, _TWO = np.float32(0.0), np.float32(1.0), np.float32(2.0)
 _INF, _BIG = np.float32(np.inf), np.float32(1e6)
 _TINY_NORM, _MIN_DIST = np.float32(1e-9), np.float32(1e-3)
-_CAP, _FORTY, _SOFTPLUS_LINEAR = np.float32(1.5), np.float32(40.0), np.float32(20.0)
-_MIN_GAP, _GRAVITY = np.float32(1e-6), np.float32(9.81)
-_EXP_ZERO = np.float32(-110.0)  # exp of less is below half the least float32: rounds to +0
+_CAP, _FORTY = np.float32(1.5), np.float32(40.0)
+_GRAVITY = np.float32(9.81)
 _WALL_NX = np.array([1.0, -1.0, 0.0, 0.0], np.float32)  # the walls' normals: left, right,
 _WALL_NY = np.array([0.0, 0.0, 1.0, -1.0], np.float32)  # bottom, top
 
@@ -167,17 +167,6 @@ def _per_axis(moves):
         if moves[k] < bottom:
             bottom = moves[k]
     return (top if top > _ZERO else _ZERO) + (bottom if bottom < _ZERO else _ZERO)
-
-
-@_jit
-def _softplus_term(distance, safe, k):
-    """``scenario.softplus_obstacle_term``: softplus((safe - distance) / k) * k."""
-    z = (safe - distance) / k
-    if z > _SOFTPLUS_LINEAR:
-        return z * k
-    if z < _EXP_ZERO:  # exp(z) rounds to +0 and log1p(+0) is +0: the same bits, no calls
-        return _ZERO * k
-    return np.log1p(np.exp(z)) * k
 
 
 @_jit
@@ -415,39 +404,53 @@ def move(vehicles, actions, evader_ax, evader_ay, alive0, fx, fy, params, max_sp
 
 
 @_jit
-def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints, p):
+def collide(
+    vehicles,
+    moved,
+    alive0,
+    damage_mask,
+    counters,
+    history,
+    boxes,
+    width,
+    height,
+    vscale,
+    radius,
+    radius_gap,
+    capture_radius,
+    capture_count,
+    capture_hold,
+    max_steps,
+    disable,
+):
     """The part of :func:`pes.sim.scenario.advance` after the dynamics: collisions, damage,
-    capture, rewards and the history frame.
+    capture and the history frame (the rewards are :mod:`pes.sim.reward`'s, from what this
+    returns).
 
     Args:
         vehicles: (16, E, A) the state before the step; moved: (13, E, A) after the dynamics
             (dead pursuers not yet held in place). alive0, damage_mask: (E, N) bool.
         counters: (7, E) int64 (:class:`~pes.sim.scenario.Counters`). history: (E, H, A, 4).
         boxes: (B, 4) buildings as centre x, y and half size x, y.
-        ints: (5,) int64 capture count, capture hold, max steps, crashes disable (0/1),
-            intercept lead on (0/1).
-        p: (20,) float32 constants: see :func:`pes.sim.kernels.collide`.
+        width, height: the arena (m); vscale: the history's velocity scale (m/s); radius,
+            radius_gap: the body radius and the radius a contact pushes out to (m);
+            capture_radius (m), capture_count, capture_hold, max_steps: the capture and episode
+            rules; disable: crashes disable a pursuer
+            (:class:`pes.sim.kernels.Constants` names them all).
 
     Returns the stepped vehicles (16, E, A), counters (7, E), alive (E, N), history, and the
-    step's reward (E, N), evader reward (E,), terminated, truncated, success (E,), crashed
-    (E, N), evader contact (E,), distances (E, N), positions and velocities (E, A, 2).
+    step's terminated, truncated, success (E,), crashed (E, N), evader contact (E,),
+    distances (E, N), positions and velocities (E, A, 2), and each vehicle's distance to its
+    nearest obstacle and velocity into it before a contact (E, A).
     """
     num_envs, n = alive0.shape
     num_vehicles, num_boxes = n + 1, boxes.shape[0]
     num_obstacles = num_boxes + 4
-    capture_count, capture_hold, max_steps = ints[0], ints[1], ints[2]
-    disable, lead_on = ints[3] != 0, ints[4] != 0
-    width, height, radius, radius_gap, capture_radius = p[0], p[1], p[2], p[3], p[4]
-    rho, co_rho, self_rho, safe, k_soft = p[5], p[6], p[7], p[8], p[9]
-    lead, approach, two_decel, encircle = p[10], p[11], p[12], p[13]
-    crash_r, capture_r, e_crash_r, e_capture_r, vscale = p[14], p[15], p[16], p[17], p[18]
 
     out_v = np.empty_like(vehicles)
     out_c = counters.copy()
     alive = np.empty_like(alive0)
     out_h = np.empty_like(history)
-    reward = np.empty((num_envs, n), np.float32)
-    evader_reward = np.empty(num_envs, np.float32)
     terminated = np.empty(num_envs, np.bool_)
     truncated = np.empty(num_envs, np.bool_)
     success = np.empty(num_envs, np.bool_)
@@ -544,9 +547,7 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
         step = counters[3, e] + 1
         damaged_now = step >= counters[6, e]
         ex, ey = out_v[0, e, n], out_v[1, e, n]
-        near, alive_count, alive0_any = 0, 0, False
-        nearest_gap = _INF
-        crash_count = 0
+        near, alive_count, crash_count = 0, 0, 0
         for i in range(n):
             crashed[e, i] = contact[base + i] and alive0[e, i]
             crash_count += 1 if crashed[e, i] else 0
@@ -557,61 +558,11 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
             if distances[e, i] < capture_radius and alive[e, i]:
                 near += 1
             alive_count += 1 if alive[e, i] else 0
-            if alive0[e, i]:
-                alive0_any = True
-                if distances[e, i] < nearest_gap:
-                    nearest_gap = distances[e, i]
         hold = counters[4, e] + 1 if near >= capture_count else 0
         success[e] = hold >= capture_hold
         terminated[e] = success[e] or alive_count < capture_count
         truncated[e] = step >= max_steps and not terminated[e]
         evader_contact[e] = contact[base + n]
-
-        # Rewards, eqs. (8)-(9).
-        paid_sum = _ZERO
-        for i in range(n):
-            paid_sum = paid_sum + distances[e, i] * (_ONE if alive0[e, i] else _ZERO)
-        r_co = co_rho * paid_sum
-        unit_x, unit_y, count = _ZERO, _ZERO, _ZERO
-        if encircle != _ZERO:
-            for i in range(n):
-                a0 = _ONE if alive0[e, i] else _ZERO
-                gap = distances[e, i] if distances[e, i] > _MIN_GAP else _MIN_GAP
-                unit_x = unit_x + (out_v[0, e, i] - ex) / gap * a0
-                unit_y = unit_y + (out_v[1, e, i] - ey) / gap * a0
-                count = count + a0
-            if count < _ONE:
-                count = _ONE
-        evx, evy = out_v[2, e, n], out_v[3, e, n]
-        for i in range(n):
-            a0 = _ONE if alive0[e, i] else _ZERO
-            own = distances[e, i]
-            if lead_on:
-                lead_x = (out_v[0, e, i] - ex) - evx * lead
-                lead_y = (out_v[1, e, i] - ey) - evy * lead
-                chaser = alive0[e, i] and distances[e, i] == nearest_gap
-                if not chaser:
-                    own = np.sqrt(lead_x * lead_x + lead_y * lead_y)
-            r_self = -(self_rho * own + _softplus_term(dist[base + i], safe, k_soft))
-            if approach != _ZERO:
-                gap = dist[base + i] - radius
-                if gap < _ZERO:
-                    gap = _ZERO
-                over = -inward[base + i] - np.sqrt(two_decel * gap)
-                r_self = r_self - approach * (over if over > _ZERO else _ZERO)
-            r = r_co + r_self
-            if encircle != _ZERO:
-                r = r - encircle * np.sqrt(unit_x * unit_x + unit_y * unit_y) / count
-            r = r + crash_r * (_ONE if crashed[e, i] else _ZERO)
-            r = r + capture_r * (_ONE if success[e] else _ZERO)
-            reward[e, i] = r * a0
-        gap_paid = nearest_gap if alive0_any else _ZERO
-        evader_reward[e] = (
-            rho * gap_paid
-            - _softplus_term(dist[base + n], safe, k_soft)
-            + e_crash_r * (_ONE if contact[base + n] else _ZERO)
-            + e_capture_r * (_ONE if success[e] else _ZERO)
-        )
         out_c[3, e], out_c[4, e], out_c[5, e] = step, hold, counters[5, e] + crash_count
 
         frames = history.shape[1]
@@ -631,8 +582,6 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
         out_c,
         alive,
         out_h,
-        reward,
-        evader_reward,
         terminated,
         truncated,
         success,
@@ -641,4 +590,6 @@ def collide(vehicles, moved, alive0, damage_mask, counters, history, boxes, ints
         distances,
         positions,
         velocities,
+        dist.reshape(num_envs, num_vehicles),
+        inward.reshape(num_envs, num_vehicles),
     )

@@ -148,6 +148,7 @@ def quadrotor_step(
     p: VehicleParams,
     dt: float,
     substeps: int,
+    use_kernels: bool = False,
 ) -> Vehicles:
     """Advance the quadrotors by one control step of ``dt`` seconds in ``substeps`` sub-steps.
 
@@ -155,6 +156,8 @@ def quadrotor_step(
         v: the vehicles, fields (E, A).
         ax_cmd, ay_cmd: desired horizontal acceleration (E, A), m/s^2, already clipped.
         fx, fy: external horizontal force (E, A), N, constant over the step.
+        use_kernels: run the sub-steps in :mod:`pes.sim.kernels` (an environment that steps
+            with them; tensors they cannot take still go through torch).
 
     Each sub-step: the attitude PID gives the moments
     M = J (kp (b ref - att) + ki int(ref - att) - kd rate) (see :func:`attitude_gains`);
@@ -170,7 +173,7 @@ def quadrotor_step(
     gyro_yaw = (p.ixx - p.iyy) / p.izz
     fx, fy = fx / p.mass, fy / p.mass
     max_speed = p.max_speed
-    if kernels.available(v.x):  # the same arithmetic, compiled (pes.sim.kernels)
+    if use_kernels and kernels.applies(v.x):  # the same arithmetic, compiled
         gyro = torch.stack([gyro_roll, gyro_pitch, gyro_yaw])
         state = torch.stack(v[:13])
         out = kernels.quadrotor_substeps(

@@ -53,6 +53,7 @@ class FleeEvader:
         threat_radius: float = 15.0,
         wall_influence: float = 5.0,
         wall_repulsion: float = 1.0,
+        use_kernels: bool = False,
     ) -> None:
         angles = torch.arange(num_rays, dtype=torch.float32, device=boxes.device)
         angles = angles * (2 * math.pi / num_rays)
@@ -62,11 +63,12 @@ class FleeEvader:
         self.margin, self.lookahead = margin, lookahead
         self.open_space, self.escape, self.threat_radius = open_space, escape, threat_radius
         self.wall_influence, self.wall_repulsion = wall_influence, wall_repulsion
+        self.use_kernels = use_kernels  # act in pes.sim.kernels (its environment steps there)
         self.kernel_constants: dict | None = None  # pes.sim.kernels' copies, built on first use
 
     def __call__(self, v: Vehicles, counters, flags) -> tuple[Tensor, Tensor]:
         alive = flags.alive  # (E, N)
-        if kernels.available(v.x):  # the same numbers, compiled (pes.sim.kernels)
+        if self.use_kernels and kernels.applies(v.x):  # the same numbers, compiled
             return kernels.flee(self, torch.stack(tuple(v)), alive)
         ex, ey, evx, evy = v.x[:, -1], v.y[:, -1], v.vx[:, -1], v.vy[:, -1]  # (E,)
         px, py = v.x[:, :-1], v.y[:, :-1]  # (E, N)

@@ -1,5 +1,6 @@
 """Compiled CPU kernels for the step: the quadrotors' commands and physics sub-steps, the
-``flee`` evader, the collisions, capture, rewards and history, and the observations.
+``flee`` evader, the collisions, capture and history, and the observations (the rewards are
+:mod:`pes.sim.reward`'s on both paths).
 
 An eager torch step spends most of its time dispatching small operations (measured in
 docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
@@ -25,9 +26,10 @@ machine (some 20-35 s on a 2-core machine) and caches the machine code (beside t
 finished for these sources, this Python and this Numba (a compilation for sources without one
 first removes the cached code of both files, as Numba keys each function on its own file only:
 :func:`clear_cache`). When the first step finds no such file it does not wait: a background
-process compiles the kernels while the steps run in torch, and the steps switch to the kernels
-once it is done. :func:`wait` loads them first, compiling them
-if need be: evaluations, trainings, ``pes bench`` and the demo call it, so that their figures
+process compiles the kernels while that environment steps in torch; an environment chooses its
+path once, when it is made (:func:`usable`), so a run never switches mid-way, and environments
+made after the compilation use the kernels. :func:`wait` loads them first, compiling them if
+need be: evaluations, trainings, ``pes bench`` and the demo call it, so that their figures
 never depend on when a compilation finished. ``PES_KERNELS=0`` in the environment, or a
 missing ``numba``, selects the torch code.
 """
@@ -43,10 +45,13 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
 from torch import Tensor
+
+from pes.sim.reward import StepFacts, evader_reward, pursuer_rewards
 
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
 _step = None  # the module of the step's kernels, once loaded
@@ -57,18 +62,26 @@ _LOOK_EVERY = 0.5  # seconds between looks
 _SOURCES = ("_numba_step.py", "_numba_substeps.py")
 
 
-def available(t: Tensor) -> bool:
-    """Whether the kernels serve tensors like ``t`` now: float32 on the CPU, no gradient, not
-    under ``torch.compile``, Numba importable (``PES_KERNELS`` not 0) and the kernels compiled
-    (while a first compilation runs in the background, the torch code serves)."""
+def usable(device: torch.device) -> bool:
+    """Whether an environment made now on ``device`` steps with the kernels, for its whole
+    life: on the CPU, Numba importable (``PES_KERNELS`` not 0) and the kernels compiled. Where
+    they are not compiled yet this starts their compilation in the background (or looks at it)
+    and says no: that environment steps in torch, and those made once it is done use them."""
+    global _next_look
+    if not _ENABLED or _failed or torch.device(device).type != "cpu":
+        return False
+    _next_look = 0.0  # look at a background compilation now
+    return _load() is not None
+
+
+def applies(t: Tensor) -> bool:
+    """Whether the kernels can take tensors like ``t`` (of an environment that uses them):
+    float32, no gradient, not under ``torch.compile``."""
     return (
-        _ENABLED
-        and not _failed
-        and t.device.type == "cpu"
+        t.device.type == "cpu"
         and t.dtype == torch.float32
         and not t.requires_grad
         and not torch.compiler.is_compiling()
-        and _load() is not None
     )
 
 
@@ -218,8 +231,8 @@ def _compile_here() -> None:
         )
         counters = np.ones((7, 1), np.int64)
         history = np.zeros((1, 2, 2, 4), np.float32)
-        ints, consts = np.ones(5, np.int64), np.ones(20, np.float32)
-        _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, ints, consts)
+        rules = (f32(1),) * 6 + (1, 1, 1, True)
+        _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, *rules)
         # the sub-step kernel of the physics outside a full step (quadrotor_substeps)
         one, state = np.ones((1, 1), np.float32), np.zeros((13, 1, 1), np.float32)
         trig, gyro = np.ones((6, 1, 1), np.float32), np.zeros((3, 1), np.float32)
@@ -298,8 +311,6 @@ def quadrotor_substeps(
 
 
 COLLIDE_OUTPUTS = (
-    "reward",
-    "evader_reward",
     "terminated",
     "truncated",
     "success",
@@ -308,6 +319,8 @@ COLLIDE_OUTPUTS = (
     "distances",
     "positions",
     "velocities",
+    "obstacle",
+    "inward",
 )
 """The outputs of :func:`pes.sim._numba_step.collide` after the state, in its order."""
 
@@ -317,9 +330,47 @@ def _numpy(t: Tensor) -> np.ndarray:
     return t.contiguous().numpy()
 
 
-def _constants(sc) -> dict:
-    """The scenario's constants as the kernels take them (NumPy, float32), built once per
-    :class:`~pes.sim.scenario.Scenario` with the same float32 operations as the torch code."""
+class Constants(NamedTuple):
+    """A scenario's constants as the kernels take them (NumPy, float32 unless said), built once
+    per :class:`~pes.sim.scenario.Scenario` with the same float32 operations as the torch
+    code."""
+
+    vehicle_params: np.ndarray
+    """(5, A): max acceleration, mass and the three gyroscopic factors of eq. (1)."""
+    dynamics: np.ndarray
+    """(6,): the sub-step (s), the setpoint weight, kp, ki, kd and the maximum tilt (rad)."""
+    no_force: np.ndarray
+    """(0, 0): the disturbance's place when it is off."""
+    boxes: np.ndarray
+    """(B, 4): the buildings as centre x, y and half size x, y (m)."""
+    other: np.ndarray
+    """(N, N) int64: row k of pursuer i's observation shows pursuer ``other[i, k]``."""
+    width: np.float32
+    """The arena's width (m)."""
+    height: np.float32
+    """The arena's height (m)."""
+    vscale: np.float32
+    """The pursuers' velocity scale of the observations and the history (m/s)."""
+    e_vscale: np.float32
+    """The evader's velocity scale of its observation (m/s)."""
+    radius: np.float32
+    """The body radius (m): a vehicle closer to an obstacle touches it."""
+    radius_gap: np.float32
+    """The distance a contact pushes a vehicle out to (m)."""
+    capture_radius: np.float32
+    """(m) of the capture rule."""
+    capture_count: int
+    """Pursuers within the capture radius that a capture needs."""
+    capture_hold: int
+    """Steps they must hold it."""
+    max_steps: int
+    """The step limit of an episode."""
+    disable: bool
+    """Crashes disable a pursuer (``crash_mode="disable"``)."""
+
+
+def _constants(sc) -> Constants:
+    """The kernels' :class:`Constants` of ``sc`` (built on first use, then kept on it)."""
     consts = sc.kernel_constants
     if consts is not None:
         return consts
@@ -328,57 +379,28 @@ def _constants(sc) -> dict:
     cfg, boxes, f32 = sc.config, sc.boxes, np.float32
     centre_x, centre_y = (boxes[:, 0] + boxes[:, 2]) * 0.5, (boxes[:, 1] + boxes[:, 3]) * 0.5
     half_x, half_y = (boxes[:, 2] - boxes[:, 0]) * 0.5, (boxes[:, 3] - boxes[:, 1]) * 0.5
-    lead = cfg.intercept_lead
     p = sc.params
     dynamics = [p.max_accel, p.mass]
     dynamics += [(p.iyy - p.izz) / p.ixx, (p.izz - p.ixx) / p.iyy, (p.ixx - p.iyy) / p.izz]
     step = [cfg.dt / cfg.physics_substeps, p.setpoint_weight, p.kp, p.ki, p.kd, p.max_tilt]
-    consts = {
-        "vehicle_params": torch.stack(dynamics).contiguous().numpy(),
-        "dynamics": np.array(step, np.float32),
-        "no_force": np.zeros((0, 0), np.float32),
-        "boxes": torch.stack([centre_x, centre_y, half_x, half_y], -1).contiguous().numpy(),
-        "other": sc.other_index.contiguous().numpy(),
-        "width": f32(sc.arena[0].item()),
-        "height": f32(sc.arena[1].item()),
-        "vscale": f32(sc.vel_scale),
-        "e_vscale": f32(cfg.evader_max_speed),
-        "ints": np.array(
-            [
-                cfg.capture_count,
-                cfg.capture_hold,
-                cfg.max_steps,
-                cfg.crash_mode == "disable",
-                bool(lead),
-            ],
-            np.int64,
-        ),
-        "floats": np.array(
-            [
-                sc.arena[0].item(),
-                sc.arena[1].item(),
-                cfg.body_radius,
-                cfg.body_radius + CONTACT_GAP,
-                cfg.capture_radius,
-                1.0 / cfg.arena_diagonal,
-                -cfg.cooperation_weight * (1.0 / cfg.arena_diagonal),
-                cfg.self_weight * (1.0 / cfg.arena_diagonal),
-                cfg.safe_distance,
-                cfg.softplus_k,
-                lead,
-                cfg.approach_weight,
-                2.0 * cfg.approach_decel,
-                cfg.encirclement_weight,
-                cfg.crash_reward,
-                cfg.capture_reward,
-                cfg.evader_crash_reward,
-                cfg.evader_capture_reward,
-                sc.vel_scale,
-                0.0,
-            ],
-            np.float32,
-        ),
-    }
+    consts = Constants(
+        vehicle_params=torch.stack(dynamics).contiguous().numpy(),
+        dynamics=np.array(step, np.float32),
+        no_force=np.zeros((0, 0), np.float32),
+        boxes=torch.stack([centre_x, centre_y, half_x, half_y], -1).contiguous().numpy(),
+        other=sc.other_index.contiguous().numpy(),
+        width=f32(sc.arena[0].item()),
+        height=f32(sc.arena[1].item()),
+        vscale=f32(sc.vel_scale),
+        e_vscale=f32(cfg.evader_max_speed),
+        radius=f32(cfg.body_radius),
+        radius_gap=f32(cfg.body_radius + CONTACT_GAP),
+        capture_radius=f32(cfg.capture_radius),
+        capture_count=cfg.capture_count,
+        capture_hold=cfg.capture_hold,
+        max_steps=cfg.max_steps,
+        disable=cfg.crash_mode == "disable",
+    )
     sc.kernel_constants = consts
     return consts
 
@@ -388,13 +410,7 @@ def observe(sc, vehicles: Tensor, alive: Tensor) -> dict[str, Tensor]:
     (E, N): the same dict of views, computed by one kernel call."""
     k = _constants(sc)
     obs, mask, state, evader_obs = _step.observe(
-        _numpy(vehicles),
-        _numpy(alive),
-        k["other"],
-        k["width"],
-        k["height"],
-        k["vscale"],
-        k["e_vscale"],
+        _numpy(vehicles), _numpy(alive), k.other, k.width, k.height, k.vscale, k.e_vscale
     )
     return {
         "obs": torch.from_numpy(obs),
@@ -419,7 +435,7 @@ def move_quadrotors(
     (fx, fy) (E, A) in newtons or None. Returns the first 13 fields after the step,
     (13, E, A)."""
     k = _constants(sc)
-    fx, fy = (k["no_force"], k["no_force"]) if force is None else (f.numpy() for f in force)
+    fx, fy = (k.no_force, k.no_force) if force is None else (f.numpy() for f in force)
     moved = _step.move(
         _numpy(vehicles),
         _numpy(actions),
@@ -428,9 +444,9 @@ def move_quadrotors(
         _numpy(alive0),
         fx,
         fy,
-        k["vehicle_params"],
+        k.vehicle_params,
         sc.params.max_speed.numpy(),
-        k["dynamics"],
+        k.dynamics,
         sc.config.physics_substeps,
     )
     return torch.from_numpy(moved)
@@ -498,15 +514,24 @@ def collide(
 ) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     """The rest of :func:`pes.sim.scenario.advance` once the dynamics have moved the vehicles:
     ``state`` is the packed state before the step, ``moved`` (13, E, A) the dynamics' first 13
-    fields. Returns ``advance``'s stepped state and outputs."""
+    fields. Returns ``advance``'s stepped state and outputs, the rewards from
+    :mod:`pes.sim.reward` as in the torch code."""
     k = _constants(sc)
     flags = state["flags"]
     arrays = _step.collide(
         *(_numpy(t) for t in (state["vehicles"], moved, flags[0], flags[1])),
         *(_numpy(state[key]) for key in ("counters", "history")),
-        k["boxes"],
-        k["ints"],
-        k["floats"],
+        k.boxes,
+        k.width,
+        k.height,
+        k.vscale,
+        k.radius,
+        k.radius_gap,
+        k.capture_radius,
+        k.capture_count,
+        k.capture_hold,
+        k.max_steps,
+        k.disable,
     )
     vehicles, counters, alive, history, *rest = (torch.from_numpy(a) for a in arrays)
     stepped = {
@@ -517,4 +542,23 @@ def collide(
     }
     out = {"steps": counters[3].clone(), "crashes": counters[5].clone(), "alive": alive}
     out.update(zip(COLLIDE_OUTPUTS, rest))
+    obstacle, inward = out.pop("obstacle"), out.pop("inward")
+    n = sc.config.num_pursuers
+    at = out["positions"]
+    facts = StepFacts(
+        alive0=flags[0],
+        distances=out["distances"],
+        paid=out["distances"],
+        dx=at[:, :n, 0] - at[:, n:, 0],
+        dy=at[:, :n, 1] - at[:, n:, 1],
+        evader_vx=out["velocities"][:, n:, 0],
+        evader_vy=out["velocities"][:, n:, 1],
+        obstacle=obstacle,
+        inward=inward,
+        crashed=out["crashed"],
+        success=out["success"],
+        evader_contact=out["evader_contact"],
+    )
+    out["reward"] = pursuer_rewards(sc.config, facts)
+    out["evader_reward"] = evader_reward(sc.config, facts)
     return stepped, out

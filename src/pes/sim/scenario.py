@@ -33,7 +33,6 @@ from typing import NamedTuple
 import numpy as np
 import torch
 from torch import Tensor
-from torch.nn.functional import softplus
 
 from pes.errors import ConfigError
 from pes.sim import kernels, rng
@@ -58,6 +57,7 @@ from pes.sim.geometry import (
     pick_nearest,
 )
 from pes.sim.layout import Layout, make_layout
+from pes.sim.reward import StepFacts, evader_reward, pursuer_rewards
 
 OBS_FEATURES = 8
 """Numbers per row of an observation (Table I)."""
@@ -135,7 +135,8 @@ class Scenario:
     vehicle: Tensor
     evader_policy: EvaderPolicy | None = field(default=None)
     roadmap: Roadmap | None = field(default=None)  # distance_metric="geodesic" only
-    kernel_constants: dict | None = field(default=None, repr=False)  # pes.sim.kernels' copies
+    kernels: bool = False  # steps with pes.sim.kernels (chosen when the environment is made)
+    kernel_constants: kernels.Constants | None = field(default=None, repr=False)
 
     @property
     def num_pursuers(self) -> int:
@@ -213,6 +214,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
         other_index=others,
         vel_scale=config.pursuer_max_speed,
         vehicle=torch.arange(config.num_vehicles, device=device),
+        kernels=kernels.usable(device),
     )
     if config.distance_metric == "geodesic":
         scenario.roadmap = build_roadmap(boxes, arena, config.body_radius + ROADMAP_CLEARANCE)
@@ -223,6 +225,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
             config.evader_max_speed,
             config.evader_max_accel,
             margin=config.body_radius + 0.7,
+            use_kernels=scenario.kernels,
         )
     elif config.evader_policy == "random":
         scenario.evader_policy = RandomEvader()
@@ -255,7 +258,7 @@ def observe(sc: Scenario, v: Vehicles, f: Flags) -> dict[str, Tensor]:
             [position and velocity relative to the evader, vector from it to its nearest
             obstacle, 0, 0] (zero if dead). Velocities divided by the evader's max speed.
     """
-    if kernels.available(v.x):  # the same numbers, compiled (pes.sim.kernels)
+    if sc.kernels and kernels.applies(v.x):  # the same numbers, compiled (pes.sim.kernels)
         return kernels.observe(sc, torch.stack(tuple(v)), f.alive)
     n = sc.num_pursuers
     alive = f.alive
@@ -418,12 +421,6 @@ def _disturbance(sc: Scenario, c: Counters) -> tuple[Tensor, Tensor]:
     return torch.cos(angle) * magnitude, torch.sin(angle) * magnitude
 
 
-def softplus_obstacle_term(obstacle_dist: Tensor, safe_distance: float, k: float) -> Tensor:
-    """k * log(exp(0) + exp((d_safe - d_obs) / k)) of eq. (9), computed without overflow for
-    any distance (also negative, inside a wall); (...) in metres."""
-    return softplus((safe_distance - obstacle_dist) / k) * k
-
-
 def resolve_contacts(
     x: Tensor,
     y: Tensor,
@@ -499,7 +496,7 @@ def advance(
         eax, eay = sc.evader_policy(v, c, f)
     else:
         eax, eay = evader_action[:, 0], evader_action[:, 1]
-    fast = sc.roadmap is None and kernels.available(v.x)  # compiled (pes.sim.kernels)
+    fast = sc.roadmap is None and sc.kernels and kernels.applies(v.x)  # pes.sim.kernels
     if fast and cfg.dynamics == "quadrotor":
         force = _disturbance(sc, c) if cfg.disturbance else None
         moved = kernels.move_quadrotors(sc, state["vehicles"], actions, eax, eay, alive0, force)
@@ -514,8 +511,10 @@ def advance(
     else:
         fx = fy = torch.zeros_like(ax)
 
-    dynamics = quadrotor_step if cfg.dynamics == "quadrotor" else point_mass_step
-    moved = dynamics(v, ax, ay, fx, fy, p, cfg.dt, cfg.physics_substeps)
+    if cfg.dynamics == "quadrotor":
+        moved = quadrotor_step(v, ax, ay, fx, fy, p, cfg.dt, cfg.physics_substeps, sc.kernels)
+    else:
+        moved = point_mass_step(v, ax, ay, fx, fy, p, cfg.dt, cfg.physics_substeps)
     if fast:  # the rest, compiled
         return kernels.collide(sc, state, torch.stack(moved[:13]))
     # Dead pursuers stay where they fell, at rest.
@@ -567,53 +566,24 @@ def advance(
     terminated = success | (alive.sum(-1) < cfg.capture_count)
     truncated = (step >= cfg.max_steps) & ~terminated
 
-    # Rewards, eqs. (8)-(9), for the pursuers alive at the start of the step.
-    rho = 1.0 / cfg.arena_diagonal
-    alive0_f = alive0.to(x.dtype)
-    paid = distances  # the distance the reward charges
+    paid = distances
     if sc.roadmap is not None:  # Not in the paper: the path round the buildings
         pursuers = torch.stack([x[:, :n], y[:, :n]], dim=-1)
         evader = torch.stack([x[:, n], y[:, n]], dim=-1)
         paid = geodesic_distance(pursuers, evader, sc.boxes, sc.roadmap)
-    r_co = -cfg.cooperation_weight * rho * (paid * alive0_f).sum(-1, keepdim=True)
-    obstacle_term = softplus_obstacle_term(dist[:, :n], cfg.safe_distance, cfg.softplus_k)
-    # The nearest alive pursuer's distance (E, 1): the evader's reward, and the chaser's role.
-    nearest_gap = torch.where(alive0, distances, float("inf")).amin(-1, keepdim=True)
-    own_distance = paid
-    if cfg.intercept_lead:
-        # Not in the paper: all but the nearest alive pursuer aim at the evader's lead point.
-        lead_x = dx - moved.vx[:, n:] * cfg.intercept_lead
-        lead_y = dy - moved.vy[:, n:] * cfg.intercept_lead
-        to_lead = torch.sqrt(lead_x * lead_x + lead_y * lead_y)
-        chaser = alive0 & (distances == nearest_gap)
-        own_distance = torch.where(chaser, paid, to_lead)
-    r_self = -(cfg.self_weight * rho * own_distance + obstacle_term)
-    if cfg.approach_weight:
-        # Not in the paper: the speed (m/s) at which each pursuer closes on its nearest obstacle
-        # (``inward``: before the contact stopped it) above the speed it could still brake from
-        # in its gap.
-        gap = (dist[:, :n] - cfg.body_radius).clamp(min=0.0)
-        brakeable = torch.sqrt(2.0 * cfg.approach_decel * gap)
-        r_self = r_self - cfg.approach_weight * (-inward[:, :n] - brakeable).clamp(min=0.0)
-    reward = r_co + r_self
-    if cfg.encirclement_weight:
-        # Not in the paper: how one-sided the alive pursuers are, seen from the evader -- the
-        # length of the mean of the unit vectors towards them, in [0, 1].
-        unit_x = (dx / distances.clamp(min=1e-6) * alive0_f).sum(-1, keepdim=True)
-        unit_y = (dy / distances.clamp(min=1e-6) * alive0_f).sum(-1, keepdim=True)
-        count = alive0_f.sum(-1, keepdim=True).clamp(min=1.0)
-        reward = reward - cfg.encirclement_weight * torch.sqrt(unit_x**2 + unit_y**2) / count
-    reward = (
-        reward
-        + cfg.crash_reward * crashed.to(x.dtype)
-        + cfg.capture_reward * success.unsqueeze(-1).to(x.dtype)
-    ) * alive0_f
-    nearest_gap = torch.where(alive0.any(-1), nearest_gap[:, 0], 0.0)
-    evader_reward = (
-        rho * nearest_gap
-        - softplus_obstacle_term(dist[:, -1], cfg.safe_distance, cfg.softplus_k)
-        + cfg.evader_crash_reward * contact[:, -1].to(x.dtype)
-        + cfg.evader_capture_reward * success.to(x.dtype)
+    facts = StepFacts(
+        alive0=alive0,
+        distances=distances,
+        paid=paid,
+        dx=dx,
+        dy=dy,
+        evader_vx=vx[:, n:],
+        evader_vy=vy[:, n:],
+        obstacle=dist,
+        inward=inward,
+        crashed=crashed,
+        success=success,
+        evader_contact=contact[:, -1],
     )
 
     crashes = c.crashes + crashed.sum(-1)
@@ -625,8 +595,8 @@ def advance(
         "steps": step,
         "crashes": crashes,
         "alive": alive,
-        "reward": reward,
-        "evader_reward": evader_reward,
+        "reward": pursuer_rewards(cfg, facts),
+        "evader_reward": evader_reward(cfg, facts),
         "terminated": terminated,
         "truncated": truncated,
         "success": success,
@@ -648,7 +618,7 @@ def step_core(
     :func:`observe` (``obs``, ``obs_mask``, ``state``, ``evader_obs``).
     """
     stepped, out = advance(sc, state, actions, evader_action)
-    if kernels.available(stepped["vehicles"]):
+    if sc.kernels and kernels.applies(stepped["vehicles"]):
         out.update(kernels.observe(sc, stepped["vehicles"], stepped["flags"][0]))
     else:
         v, _, f = unpack(stepped)
