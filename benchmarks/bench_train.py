@@ -55,7 +55,9 @@ def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
     env_cfg = cls.adapt_env(cfg.env_config())
     torch.manual_seed(0)
     learner = cls(cfg, env_cfg, torch.device(device))
-    env = make_env(env_cfg, num_envs=cfg.num_envs, device=device, seed=0, compile=True)
+    env = make_env(
+        env_cfg, num_envs=cfg.num_envs, device=device, seed=0, compile=True, wait_kernels=True
+    )
     gen = torch.Generator().manual_seed(0)
     obs, info = env.reset()
     sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
