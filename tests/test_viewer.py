@@ -233,6 +233,18 @@ def _changed(a: Image.Image, b: Image.Image) -> float:
     return diff.histogram()[255] / (a.width * a.height)
 
 
+def _wait_for(browser, expression: str, guard: float = 600.0):
+    """The first truthy value of the JavaScript ``expression``, polled; ``guard`` seconds only
+    keep a broken page from hanging the tests (a slow machine is not a failure)."""
+    started = time.time()
+    while time.time() - started < guard:
+        value = browser.execute_script(f"return {expression}")
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"never true within {guard:.0f} s: {expression}")
+
+
 def test_replay_in_headless_chromium(browser, record_path, tmp_path):
     page = tmp_path / "replay.html"
     assert main(["view", str(record_path), "--out", str(page)]) == 0
@@ -240,14 +252,8 @@ def test_replay_in_headless_chromium(browser, record_path, tmp_path):
     n = sum(a["role"] == "pursuer" for a in record["agents"])
     last = len(record["frames"]) - 1
 
-    started = time.time()
     browser.get(page.as_uri())
-    state = None
-    while time.time() - started < 60:
-        state = browser.execute_script("return window.pesViewer || null")
-        if state and (state["ready"] or state["error"]):
-            break
-        time.sleep(0.1)
+    state = _wait_for(browser, "(v => v && (v.ready || v.error) ? v : null)(window.pesViewer)")
     assert state and state["ready"] and state["error"] is None, state
     assert state["vehicles"] == n + 1 and state["trails"] == n + 1
     assert state["buildings"] == len(record["buildings"]) > 0
@@ -279,10 +285,7 @@ def test_replay_in_headless_chromium(browser, record_path, tmp_path):
     browser.execute_script("pesViewer.setStep(0)")
     browser.find_element("css selector", "#speed option[value='8']").click()
     browser.find_element("id", "btn-play").click()  # plays to the end, then stops
-    started = time.time()
-    while browser.execute_script("return pesViewer.playing || pesViewer.step === 0"):
-        assert time.time() - started < 60, "playback does not run to the end"
-        time.sleep(0.2)
+    _wait_for(browser, "!(pesViewer.playing || pesViewer.step === 0)")
     state = browser.execute_script("return pesViewer")
     assert state["step"] == last and state["speed"] == 8 and not state["playing"]
 
