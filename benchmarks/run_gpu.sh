@@ -9,14 +9,17 @@
 # 1. the CUDA tests: the step on the GPU against the CPU's from the same states, a PID(PF)
 #    restored from a checkpoint; where torchrl and benchmarl import, the TorchRL environment on
 #    CUDA and `pes eval --device cuda` of a BenchMARL checkpoint (skipped where they do not);
-# 2. simulator throughput at large batches, as make_env gives it (sim_cuda.json) and fused by
+# 2. training throughput of the `gpu` presets of CBC-TP Net and MAPPO (train_gpu_preset.json;
+#    targets: 20,000 and 500,000 training env-steps/s), then of every other learner's
+#    (train_gpu_preset_others.json);
+# 3. simulator throughput at large batches, as make_env gives it (sim_cuda.json) and fused by
 #    torch.compile (sim_cuda_compiled.json);
-# 3. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
-# 4. the shipped swarm evaluated on the GPU (eval_cuda.json; compare its model card, measured
+# 4. training throughput of CBC-TP Net, quick and paper presets (train_cuda.json);
+# 5. the shipped swarm evaluated on the GPU (eval_cuda.json; compare its model card, measured
 #    on a CPU: the same statistics, not the same episodes);
-# 5. a real quick-preset training on the GPU, stopped by its time limit and resumed
+# 6. a real quick-preset training on the GPU, stopped by its time limit and resumed
 #    (train_quick_cuda*.json; its progress log goes into gpu_log.txt);
-# 6. training throughput of the DDPG evader and CBC (train_cuda_others.json).
+# 7. training throughput of the DDPG evader and CBC (train_cuda_others.json).
 # Each part has its own time limit, cut to what is left of BUDGET_S, so that a slow part costs
 # only the parts after it; every part writes its file as soon as it ends.
 OUT=${1:-benchmarks/results}
@@ -40,6 +43,9 @@ part pytest-cuda
 timeout "$(lim 120)" python3 -m pytest -q -p no:cacheprovider tests/test_env.py tests/test_kernels.py \
     tests/test_policies.py tests/test_torchrl.py -k "cuda or gpu or measures_a_benchmarl_checkpoint" \
     2>&1 | tail -3 | tee -a "$LOG"
+part bench-gpu-presets
+timeout "$(lim 150)" python3 benchmarks/bench_train.py --device cuda --seconds 4 --presets gpu \
+    --algos cbc-tp mappo --out "$OUT/train_gpu_preset.json" >>"$LOG" 2>&1
 part bench-sim
 timeout "$(lim 60)" python3 benchmarks/bench_sim.py --device cuda --sizes 4096 65536 262144 1048576 \
     --skip-baselines --out "$OUT/sim_cuda.json" >>"$LOG" 2>&1
@@ -64,4 +70,7 @@ cat "$RUN/q/progress.csv" >>"$LOG" 2>/dev/null  # the progress log (8 files come
 part bench-others
 timeout "$(lim 60)" python3 benchmarks/bench_train.py --device cuda --seconds 3 \
     --algos evader-ddpg cbc --out "$OUT/train_cuda_others.json" >>"$LOG" 2>&1
+part bench-gpu-presets-others
+timeout "$(lim 120)" python3 benchmarks/bench_train.py --device cuda --seconds 3 --presets gpu \
+    --algos ppo maddpg ddpg bicnet maac cbc --out "$OUT/train_gpu_preset_others.json" >>"$LOG" 2>&1
 part done
