@@ -566,7 +566,7 @@ def advance(
     terminated = success | (alive.sum(-1) < cfg.capture_count)
     truncated = (step >= cfg.max_steps) & ~terminated
 
-    paid = distances
+    paid = distances  # the distance the reward charges
     if sc.roadmap is not None:  # Not in the paper: the path round the buildings
         pursuers = torch.stack([x[:, :n], y[:, :n]], dim=-1)
         evader = torch.stack([x[:, n], y[:, n]], dim=-1)
