@@ -1,7 +1,7 @@
 """The Numba kernels of :mod:`pes.sim.kernels` for the rest of the step (imported on first use
-only): the ``flee`` evader, the collisions, capture and history of
-:func:`pes.sim.scenario.advance`, and :func:`pes.sim.scenario.observe`. The rewards are
-:mod:`pes.sim.reward`'s, in torch, on both paths.
+only): the ``flee`` evader, the collisions, capture, rewards (:mod:`pes.sim.reward`'s terms,
+term by term) and history of :func:`pes.sim.scenario.advance`, and
+:func:`pes.sim.scenario.observe`.
 
 Each function walks the environments once and repeats the torch code's float32 arithmetic
 operation by operation: every constant arrives as a float32 argument (torch rounds a Python
@@ -23,8 +23,9 @@ from pes.sim import _numba_substeps as ss
 _ZERO, _ONE, _TWO = np.float32(0.0), np.float32(1.0), np.float32(2.0)
 _INF, _BIG = np.float32(np.inf), np.float32(1e6)
 _TINY_NORM, _MIN_DIST = np.float32(1e-9), np.float32(1e-3)
-_CAP, _FORTY = np.float32(1.5), np.float32(40.0)
-_GRAVITY = np.float32(9.81)
+_CAP, _FORTY, _SOFTPLUS_LINEAR = np.float32(1.5), np.float32(40.0), np.float32(20.0)
+_MIN_GAP, _GRAVITY = np.float32(1e-6), np.float32(9.81)
+_EXP_ZERO = np.float32(-110.0)  # exp of less is below half the least float32: rounds to +0
 _WALL_NX = np.array([1.0, -1.0, 0.0, 0.0], np.float32)  # the walls' normals: left, right,
 _WALL_NY = np.array([0.0, 0.0, 1.0, -1.0], np.float32)  # bottom, top
 
@@ -167,6 +168,17 @@ def _per_axis(moves):
         if moves[k] < bottom:
             bottom = moves[k]
     return (top if top > _ZERO else _ZERO) + (bottom if bottom < _ZERO else _ZERO)
+
+
+@_jit
+def _softplus_term(distance, safe, k):
+    """``reward.softplus_obstacle_term``: softplus((safe - distance) / k) * k."""
+    z = (safe - distance) / k
+    if z > _SOFTPLUS_LINEAR:
+        return z * k
+    if z < _EXP_ZERO:  # exp(z) rounds to +0 and log1p(+0) is +0: the same bits, no calls
+        return _ZERO * k
+    return np.log1p(np.exp(z)) * k
 
 
 @_jit
@@ -422,10 +434,10 @@ def collide(
     capture_hold,
     max_steps,
     disable,
+    w,
 ):
     """The part of :func:`pes.sim.scenario.advance` after the dynamics: collisions, damage,
-    capture and the history frame (the rewards are :mod:`pes.sim.reward`'s, from what this
-    returns).
+    capture, rewards (:mod:`pes.sim.reward`'s terms, in its order) and the history frame.
 
     Args:
         vehicles: (16, E, A) the state before the step; moved: (13, E, A) after the dynamics
@@ -435,13 +447,13 @@ def collide(
         width, height: the arena (m); vscale: the history's velocity scale (m/s); radius,
             radius_gap: the body radius and the radius a contact pushes out to (m);
             capture_radius (m), capture_count, capture_hold, max_steps: the capture and episode
-            rules; disable: crashes disable a pursuer
-            (:class:`pes.sim.kernels.Constants` names them all).
+            rules; disable: crashes disable a pursuer; w: the reward's weights
+            (:class:`pes.sim.kernels.RewardWeights`; :class:`pes.sim.kernels.Constants` names
+            the others).
 
     Returns the stepped vehicles (16, E, A), counters (7, E), alive (E, N), history, and the
-    step's terminated, truncated, success (E,), crashed (E, N), evader contact (E,),
-    distances (E, N), positions and velocities (E, A, 2), and each vehicle's distance to its
-    nearest obstacle and velocity into it before a contact (E, A).
+    step's reward (E, N), evader reward (E,), terminated, truncated, success (E,), crashed
+    (E, N), evader contact (E,), distances (E, N), positions and velocities (E, A, 2).
     """
     num_envs, n = alive0.shape
     num_vehicles, num_boxes = n + 1, boxes.shape[0]
@@ -451,6 +463,8 @@ def collide(
     out_c = counters.copy()
     alive = np.empty_like(alive0)
     out_h = np.empty_like(history)
+    reward = np.empty((num_envs, n), np.float32)
+    evader_reward = np.empty(num_envs, np.float32)
     terminated = np.empty(num_envs, np.bool_)
     truncated = np.empty(num_envs, np.bool_)
     success = np.empty(num_envs, np.bool_)
@@ -548,6 +562,7 @@ def collide(
         damaged_now = step >= counters[6, e]
         ex, ey = out_v[0, e, n], out_v[1, e, n]
         near, alive_count, crash_count = 0, 0, 0
+        alive0_any, nearest_gap = False, _INF
         for i in range(n):
             crashed[e, i] = contact[base + i] and alive0[e, i]
             crash_count += 1 if crashed[e, i] else 0
@@ -558,11 +573,60 @@ def collide(
             if distances[e, i] < capture_radius and alive[e, i]:
                 near += 1
             alive_count += 1 if alive[e, i] else 0
+            if alive0[e, i]:
+                alive0_any = True
+                if distances[e, i] < nearest_gap:
+                    nearest_gap = distances[e, i]
         hold = counters[4, e] + 1 if near >= capture_count else 0
         success[e] = hold >= capture_hold
         terminated[e] = success[e] or alive_count < capture_count
         truncated[e] = step >= max_steps and not terminated[e]
         evader_contact[e] = contact[base + n]
+        # Rewards: pes.sim.reward's terms in its order, eqs. (8)-(9) and then the protocol's.
+        paid_sum = _ZERO
+        for i in range(n):
+            paid_sum = paid_sum + distances[e, i] * (_ONE if alive0[e, i] else _ZERO)
+        r_co = w.cooperation * paid_sum
+        unit_x, unit_y, count = _ZERO, _ZERO, _ZERO
+        if w.encirclement != _ZERO:
+            for i in range(n):
+                a0 = _ONE if alive0[e, i] else _ZERO
+                gap = distances[e, i] if distances[e, i] > _MIN_GAP else _MIN_GAP
+                unit_x = unit_x + (out_v[0, e, i] - ex) / gap * a0
+                unit_y = unit_y + (out_v[1, e, i] - ey) / gap * a0
+                count = count + a0
+            if count < _ONE:
+                count = _ONE
+        evx, evy = out_v[2, e, n], out_v[3, e, n]
+        for i in range(n):
+            a0 = _ONE if alive0[e, i] else _ZERO
+            own = distances[e, i]
+            if w.lead_on:
+                lead_x = (out_v[0, e, i] - ex) - evx * w.lead
+                lead_y = (out_v[1, e, i] - ey) - evy * w.lead
+                chaser = alive0[e, i] and distances[e, i] == nearest_gap
+                if not chaser:
+                    own = np.sqrt(lead_x * lead_x + lead_y * lead_y)
+            r_self = -(w.self_rho * own + _softplus_term(dist[base + i], w.safe, w.softplus_k))
+            if w.approach != _ZERO:
+                gap = dist[base + i] - radius
+                if gap < _ZERO:
+                    gap = _ZERO
+                over = -inward[base + i] - np.sqrt(w.two_decel * gap)
+                r_self = r_self - w.approach * (over if over > _ZERO else _ZERO)
+            r = r_co + r_self
+            if w.encirclement != _ZERO:
+                r = r - w.encirclement * np.sqrt(unit_x * unit_x + unit_y * unit_y) / count
+            r = r + w.crash * (_ONE if crashed[e, i] else _ZERO)
+            r = r + w.capture * (_ONE if success[e] else _ZERO)
+            reward[e, i] = r * a0
+        gap_paid = nearest_gap if alive0_any else _ZERO
+        evader_reward[e] = (
+            w.rho * gap_paid
+            - _softplus_term(dist[base + n], w.safe, w.softplus_k)
+            + w.evader_crash * (_ONE if contact[base + n] else _ZERO)
+            + w.evader_capture * (_ONE if success[e] else _ZERO)
+        )
         out_c[3, e], out_c[4, e], out_c[5, e] = step, hold, counters[5, e] + crash_count
 
         frames = history.shape[1]
@@ -582,6 +646,8 @@ def collide(
         out_c,
         alive,
         out_h,
+        reward,
+        evader_reward,
         terminated,
         truncated,
         success,
@@ -590,6 +656,4 @@ def collide(
         distances,
         positions,
         velocities,
-        dist.reshape(num_envs, num_vehicles),
-        inward.reshape(num_envs, num_vehicles),
     )

@@ -1,6 +1,5 @@
 """Compiled CPU kernels for the step: the quadrotors' commands and physics sub-steps, the
-``flee`` evader, the collisions, capture and history, and the observations (the rewards are
-:mod:`pes.sim.reward`'s on both paths).
+``flee`` evader, the collisions, capture, rewards and history, and the observations.
 
 An eager torch step spends most of its time dispatching small operations (measured in
 docs/performance.md): some 1,000 tensor operations per control step, each costing microseconds
@@ -50,8 +49,6 @@ from typing import NamedTuple
 import numpy as np
 import torch
 from torch import Tensor
-
-from pes.sim.reward import StepFacts, evader_reward, pursuer_rewards
 
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
 _step = None  # the module of the step's kernels, once loaded
@@ -232,7 +229,8 @@ def _compile_here() -> None:
         counters = np.ones((7, 1), np.int64)
         history = np.zeros((1, 2, 2, 4), np.float32)
         rules = (f32(1),) * 6 + (1, 1, 1, True)
-        _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, *rules)
+        weights = RewardWeights(*(f32(1),) * 6, True, *(f32(1),) * 7)
+        _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, *rules, weights)
         # the sub-step kernel of the physics outside a full step (quadrotor_substeps)
         one, state = np.ones((1, 1), np.float32), np.zeros((13, 1, 1), np.float32)
         trig, gyro = np.ones((6, 1, 1), np.float32), np.zeros((3, 1), np.float32)
@@ -311,6 +309,8 @@ def quadrotor_substeps(
 
 
 COLLIDE_OUTPUTS = (
+    "reward",
+    "evader_reward",
     "terminated",
     "truncated",
     "success",
@@ -319,8 +319,6 @@ COLLIDE_OUTPUTS = (
     "distances",
     "positions",
     "velocities",
-    "obstacle",
-    "inward",
 )
 """The outputs of :func:`pes.sim._numba_step.collide` after the state, in its order."""
 
@@ -328,6 +326,40 @@ COLLIDE_OUTPUTS = (
 def _numpy(t: Tensor) -> np.ndarray:
     """A CPU tensor as a C-contiguous NumPy array, without a copy where it already is one."""
     return t.contiguous().numpy()
+
+
+class RewardWeights(NamedTuple):
+    """The reward's constants as the kernels take them (float32, rounded as the torch code
+    rounds them), for the terms of :mod:`pes.sim.reward` that the collision kernel repeats."""
+
+    rho: np.float32
+    """1 / the arena's diagonal (1/m)."""
+    cooperation: np.float32
+    """-cooperation_weight * rho, eq. (8)."""
+    self_rho: np.float32
+    """self_weight * rho, eq. (9)."""
+    safe: np.float32
+    """d_safe of eq. (9) (m)."""
+    softplus_k: np.float32
+    """k of eq. (9)'s softplus (m)."""
+    lead: np.float32
+    """``intercept_lead`` (s)."""
+    lead_on: bool
+    """Whether ``intercept_lead`` is on."""
+    approach: np.float32
+    """``approach_weight``."""
+    two_decel: np.float32
+    """2 * ``approach_decel`` (m/s^2)."""
+    encirclement: np.float32
+    """``encirclement_weight``."""
+    crash: np.float32
+    """``crash_reward``."""
+    capture: np.float32
+    """``capture_reward``."""
+    evader_crash: np.float32
+    """``evader_crash_reward``."""
+    evader_capture: np.float32
+    """``evader_capture_reward``."""
 
 
 class Constants(NamedTuple):
@@ -367,6 +399,8 @@ class Constants(NamedTuple):
     """The step limit of an episode."""
     disable: bool
     """Crashes disable a pursuer (``crash_mode="disable"``)."""
+    reward: RewardWeights
+    """The reward's constants."""
 
 
 def _constants(sc) -> Constants:
@@ -400,6 +434,22 @@ def _constants(sc) -> Constants:
         capture_hold=cfg.capture_hold,
         max_steps=cfg.max_steps,
         disable=cfg.crash_mode == "disable",
+        reward=RewardWeights(
+            rho=f32(1.0 / cfg.arena_diagonal),
+            cooperation=f32(-cfg.cooperation_weight * (1.0 / cfg.arena_diagonal)),
+            self_rho=f32(cfg.self_weight * (1.0 / cfg.arena_diagonal)),
+            safe=f32(cfg.safe_distance),
+            softplus_k=f32(cfg.softplus_k),
+            lead=f32(cfg.intercept_lead),
+            lead_on=bool(cfg.intercept_lead),
+            approach=f32(cfg.approach_weight),
+            two_decel=f32(2.0 * cfg.approach_decel),
+            encirclement=f32(cfg.encirclement_weight),
+            crash=f32(cfg.crash_reward),
+            capture=f32(cfg.capture_reward),
+            evader_crash=f32(cfg.evader_crash_reward),
+            evader_capture=f32(cfg.evader_capture_reward),
+        ),
     )
     sc.kernel_constants = consts
     return consts
@@ -514,8 +564,7 @@ def collide(
 ) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     """The rest of :func:`pes.sim.scenario.advance` once the dynamics have moved the vehicles:
     ``state`` is the packed state before the step, ``moved`` (13, E, A) the dynamics' first 13
-    fields. Returns ``advance``'s stepped state and outputs, the rewards from
-    :mod:`pes.sim.reward` as in the torch code."""
+    fields. Returns ``advance``'s stepped state and outputs."""
     k = _constants(sc)
     flags = state["flags"]
     arrays = _step.collide(
@@ -532,6 +581,7 @@ def collide(
         k.capture_hold,
         k.max_steps,
         k.disable,
+        k.reward,
     )
     vehicles, counters, alive, history, *rest = (torch.from_numpy(a) for a in arrays)
     stepped = {
@@ -542,23 +592,4 @@ def collide(
     }
     out = {"steps": counters[3].clone(), "crashes": counters[5].clone(), "alive": alive}
     out.update(zip(COLLIDE_OUTPUTS, rest))
-    obstacle, inward = out.pop("obstacle"), out.pop("inward")
-    n = sc.config.num_pursuers
-    at = out["positions"]
-    facts = StepFacts(
-        alive0=flags[0],
-        distances=out["distances"],
-        paid=out["distances"],
-        dx=at[:, :n, 0] - at[:, n:, 0],
-        dy=at[:, :n, 1] - at[:, n:, 1],
-        evader_vx=out["velocities"][:, n:, 0],
-        evader_vy=out["velocities"][:, n:, 1],
-        obstacle=obstacle,
-        inward=inward,
-        crashed=out["crashed"],
-        success=out["success"],
-        evader_contact=out["evader_contact"],
-    )
-    out["reward"] = pursuer_rewards(sc.config, facts)
-    out["evader_reward"] = evader_reward(sc.config, facts)
     return stepped, out

@@ -1,9 +1,14 @@
 """The step's rewards: every term, the paper's (eqs. 8-9) and the ones a training protocol may
 add, computed from what the physics of a step left (:class:`StepFacts`).
 
-Both step paths call :func:`rewards`: the torch step (:func:`pes.sim.scenario.advance`) and the
-compiled CPU kernels (:func:`pes.sim.kernels.collide`), which return these facts instead of
-rewards. A new term is one function here and one key of :class:`pes.EnvConfig`.
+The torch step (:func:`pes.sim.scenario.advance`) calls :func:`pursuer_rewards` and
+:func:`evader_reward`; the compiled CPU kernel of the collisions
+(:func:`pes.sim._numba_step.collide`) repeats these terms in the same order inside its loop
+over the environments, with their constants in :class:`pes.sim.kernels.RewardWeights` (calling
+back into torch from there would double the step's time at small batches: some forty small
+operations). A new term is a function here, a key of :class:`pes.EnvConfig`, a field of
+``RewardWeights`` and its lines in the kernel; ``tests/test_kernels.py`` holds the two paths to
+the same rewards.
 
 Shapes: E environments, N pursuers; distances in metres, speeds in m/s. A pursuer earns its
 reward for a step if it was alive when the step began.
