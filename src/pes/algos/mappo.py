@@ -39,7 +39,8 @@ MAPPO_QUICK: dict[str, Any] = PPO_TUNED | dict(gamma=0.95, grad_clip=1.0, huber_
 on this task (learning rates 6.12e-4 / 7.8e-4, entropy bonus 1e-3, 128 units), the paper's
 discount 0.95, PPO's gradient clip 1 and squared-error value loss. With Yu et al.'s own MAPPO
 failed the positive control (results/positive_control: 36.4 % against PID(PF)'s 45.8 % with the
-evader at 8 m/s; 43.1 % with the discount 0.95 alone); with these it captured 70.2 %."""
+evader at 8 m/s; 43.1 % with the discount 0.95 alone); with these it captured 60.7 % (70.2 % in
+an earlier run)."""
 
 MAPPO_PRESETS: dict[str, dict[str, Any]] = {
     "paper": dict(MAPPO_DEFAULTS, episodes=4000, num_envs=1, env=dict(evader_policy="ddpg")),
