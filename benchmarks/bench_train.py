@@ -47,18 +47,29 @@ from pes.sim.bench import machine_info
 from pes.sim.env import make_env, resolve_device
 
 
-def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
-    # The learner's own acting and updates: without this, the quick preset's PID(PF)
-    # demonstrations (its first 100,000 transitions) would play through the timed window.
+def learner_and_env(algo: str, preset: str, device: str, compile_env: bool = True):
+    """``algo``'s ``preset`` as a benchmark runs it: its config, learner class, learner and
+    environments (seed 0), and the sampler's generator. The learner acts and updates on its own:
+    without the demonstrations, the quick preset's PID(PF) (its first 100,000 transitions)
+    would play through a timed window."""
     cfg = build_train_config(algo, preset, {"device": device, "protocol.demonstrations": None})
     cls = ALGOS[algo]
     env_cfg = cls.adapt_env(cfg.env_config())
     torch.manual_seed(0)
     learner = cls(cfg, env_cfg, torch.device(device))
     env = make_env(
-        env_cfg, num_envs=cfg.num_envs, device=device, seed=0, compile=True, wait_kernels=True
+        env_cfg,
+        num_envs=cfg.num_envs,
+        device=device,
+        seed=0,
+        compile=compile_env,
+        wait_kernels=True,
     )
-    gen = torch.Generator().manual_seed(0)
+    return cfg, cls, env_cfg, learner, env, torch.Generator().manual_seed(0)
+
+
+def measure(algo: str, preset: str, device: str, seconds: float) -> dict:
+    cfg, cls, env_cfg, learner, env, gen = learner_and_env(algo, preset, device)
     obs, info = env.reset()
     sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
     lc = cfg.learner

@@ -25,11 +25,10 @@ import time
 from pathlib import Path
 
 import torch
+from bench_train import learner_and_env  # beside this file
 from torch import Tensor, nn
 
-from pes.algos import ALGOS, build_train_config
 from pes.sim.bench import machine_info
-from pes.sim.env import make_env
 
 LSTM_SIZES = [  # (hidden, batch, sequence, inputs, what)
     (32, 2560, 6, 9, "CBC-TP Net's target actor: 512 samples x 5 pursuers"),
@@ -123,13 +122,7 @@ def lstm_rows() -> list[dict]:
 
 def autocast_row(algo: str, updates: int) -> dict:
     """One learner's quick-preset update in float32 and under bfloat16 autocast."""
-    cfg = build_train_config(algo, "quick", {"protocol.demonstrations": None})
-    cls = ALGOS[algo]
-    env_cfg = cls.adapt_env(cfg.env_config())
-    torch.manual_seed(0)
-    learner = cls(cfg, env_cfg, torch.device("cpu"))
-    env = make_env(env_cfg, num_envs=cfg.num_envs, seed=0, wait_kernels=True)
-    gen = torch.Generator().manual_seed(0)
+    cfg, cls, _, learner, env, gen = learner_and_env(algo, "quick", "cpu", compile_env=False)
     obs, info = env.reset()
     lc = cfg.learner
     need = lc.batch_size if cls.on_policy else max(lc.warmup, lc.batch_size)
