@@ -22,10 +22,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from pes.algos import ALGOS  # noqa: E402
-from pes.config import field_table  # noqa: E402
 from pes.learn.config import TrainConfig  # noqa: E402
 from pes.learn.protocol import PROTOCOLS  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
+from pes.strict import field_table  # noqa: E402
 
 
 def _calibration_table() -> str:

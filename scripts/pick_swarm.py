@@ -38,7 +38,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pes.algos.policy import load_pursuer_policy  # noqa: E402
+from pes.algos.loading import load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
 from pes.sim.config import EnvConfig  # noqa: E402
 

@@ -39,7 +39,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pes.algos.policy import describe, load_pursuer_policy  # noqa: E402
+from pes.algos.loading import describe, load_pursuer_policy  # noqa: E402
 from pes.evaluate import evaluate  # noqa: E402
 from pes.experiments.calibration import (  # noqa: E402
     EVADER_SPEEDS,

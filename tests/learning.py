@@ -10,7 +10,7 @@ from pathlib import Path
 import torch
 
 from pes.algos import ALGOS, build_train_config, train
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.evaluate import evaluate
 
 FAST = dict(compile_env=False, tensorboard=False)

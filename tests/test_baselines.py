@@ -10,8 +10,8 @@ import torch
 
 import pes
 from pes.algos import build_train_config, train
+from pes.algos.loading import load_pursuer_policy
 from pes.algos.maac import AttentionCritic, SquashedGaussianActor
-from pes.algos.policy import load_pursuer_policy
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
 from pes.learn.buffer import RolloutBuffer, gae

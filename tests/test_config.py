@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import pes
-from pes.config import field_docs, parse_override
 from pes.errors import ConfigError
 from pes.sim.layout import grid_layout, load_layout_file, make_layout
+from pes.strict import field_docs, parse_override
 
 
 def test_defaults_are_the_paper_numbers():
@@ -73,7 +73,7 @@ def test_impossible_values_are_rejected(values, message):
 
 def test_shipped_evaders_load_and_the_default_is_one_of_them():
     """Every evader name the scenario accepts is a shipped model, the default included."""
-    from pes.algos.policy import load_evader_actor
+    from pes.algos.loading import load_evader_actor
     from pes.models import SHIPPED
     from pes.sim.config import SHIPPED_EVADERS
 

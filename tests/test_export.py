@@ -15,11 +15,11 @@ import torch
 
 import pes
 from pes.algos import ALGOS, build_train_config
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.cli import main
-from pes.config import to_dict
 from pes.learn.checkpoint import POLICY_FORMAT, VERSION, save_atomic
 from pes.learn.features import other_index
+from pes.strict import to_dict
 from tests.conftest import optional
 
 optional("onnxruntime")

@@ -19,7 +19,7 @@ import pes
 from pes.algos import ALGOS, build_train_config, train
 from pes.algos.cbc_tp import CBCTP, CBCActor, CBCCritic, TPNet
 from pes.algos.evader_ddpg import EvaderDDPG
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.algos.ppo import PPO
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError

@@ -12,8 +12,8 @@ import pes
 from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, train
 from pes.algos.bicnet import BiCNetActor
 from pes.algos.ddpg import LocalCritics
+from pes.algos.loading import load_pursuer_policy
 from pes.algos.maddpg import CentralCritics, EnsembleMLP, MLPActors
-from pes.algos.policy import load_pursuer_policy
 from pes.cli import main
 from pes.errors import CheckpointError, ConfigError
 from pes.learn.features import pursuer_obs

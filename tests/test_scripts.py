@@ -12,7 +12,7 @@ from pathlib import Path
 import torch
 
 from pes.algos import build_train_config, train
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.learn.checkpoint import POLICY_FORMAT
 from pes.models import MODELS_DIR
 from pes.sim.config import EnvConfig

@@ -17,11 +17,11 @@ import torch
 
 import pes
 from pes.cli import main
-from pes.config import load_yaml, read_text_file
 from pes.errors import ActionError, CheckpointError, ConfigError
 from pes.paths import prepare_output, prepare_output_dir
 from pes.record import check_record, load_record
 from pes.sim.layout import Layout
+from pes.strict import load_yaml, read_text_file
 from tests.conftest import optional
 
 

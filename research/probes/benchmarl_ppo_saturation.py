@@ -29,7 +29,7 @@ from benchmarl.experiment.callback import Callback
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 import pes
-from pes.benchmarl.policy import load_benchmarl_policy
+from pes.benchmarl.reload import load_benchmarl_policy
 from pes.experiments.budgets import BUDGETS, eval_config
 from pes.torchrl import GROUP
 

@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from pes import __version__
-from pes.config import load_yaml, parse_override
 from pes.errors import CheckpointError, ConfigError, PESError, TrainingInterruptedError
 from pes.paths import prepare_output, prepare_output_dir, recorded_command
 from pes.sim.config import EnvConfig
 from pes.sim.env import resolve_device
+from pes.strict import load_yaml, parse_override
 
 EXIT_USER_ERROR = 2
 
@@ -133,13 +133,13 @@ def _opponent() -> dict[str, Any]:
 def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"):
     """The pursuer policy called ``name`` for the scenario ``config``: a scripted policy, a
     shipped model (``cbc-tp``), or a policy file, checkpoint or run folder."""
-    from pes.algos.policy import is_policy_spec, load_pursuer_policy
+    from pes.algos.loading import is_policy_spec, load_pursuer_policy
     from pes.policies import SCRIPTED
 
     if name in SCRIPTED:
         return SCRIPTED[name](config, seed=seed)
     if _is_benchmarl_checkpoint(name):
-        from pes.benchmarl.policy import load_benchmarl_policy
+        from pes.benchmarl.reload import load_benchmarl_policy
 
         return load_benchmarl_policy(name, config, device)
     if is_policy_spec(name):
@@ -151,7 +151,7 @@ def make_policy(name: str, config: EnvConfig, seed: int = 0, device: str = "cpu"
 
 
 def _is_benchmarl_checkpoint(name: str) -> bool:
-    """A BenchMARL experiment's ``checkpoints/*.pt`` (see :mod:`pes.benchmarl.policy`), told
+    """A BenchMARL experiment's ``checkpoints/*.pt`` (see :mod:`pes.benchmarl.reload`), told
     apart without importing BenchMARL."""
     path = Path(name)
     return (

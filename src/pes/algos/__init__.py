@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pes.algos.policy import load_evader_actor
+from pes.algos.loading import load_evader_actor
 from pes.algos.registry import ALGOS, PURSUER_ALGOS, TABLE4_ALGOS, learner_class
 from pes.learn import config, trainer
 from pes.sim.evader import register_model_loader

@@ -32,7 +32,7 @@ import torch
 from torch import Tensor, nn
 
 from pes.algos.cbc_tp import PursuerActors, TPNet
-from pes.algos.policy import describe, load_pursuer_policy
+from pes.algos.loading import describe, load_pursuer_policy
 from pes.errors import CheckpointError, PESError
 from pes.learn.actor_critic import DeterministicPolicy
 from pes.sim.config import EnvConfig

@@ -42,7 +42,7 @@ from benchmarl.experiment.callback import Callback
 from benchmarl.models import MlpConfig
 
 from pes.benchmarl import PESTask
-from pes.benchmarl.policy import load_benchmarl_policy
+from pes.benchmarl.reload import load_benchmarl_policy
 from pes.errors import ActionError, CheckpointError, PESError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, EVAL_SEED, eval_config, write_json

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.experiments.budgets import (
     BUDGETS,
     DAMAGED,

@@ -24,7 +24,7 @@ from typing import Any
 import torch
 
 from pes.algos.cbc_tp import TPNet
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.experiments.budgets import EVAL_SEED, eval_config
 from pes.models import is_shipped
 from pes.policies import PIDPotentialField

@@ -25,7 +25,7 @@ from typing import Any
 import torch
 
 from pes.algos import ALGOS, build_train_config, train
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.errors import ConfigError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import (

@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, learner_class, train
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.errors import ConfigError
 from pes.evaluate import evaluate
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, eval_config, write_json

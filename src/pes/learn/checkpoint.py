@@ -25,7 +25,7 @@ CHECKPOINT_FORMAT = "pes-checkpoint"
 POLICY_FORMAT = "pes-policy"
 VERSION = 2
 """Version 2: the training configuration in sections (``learner``, ``protocol``, ``env``).
-Policy files of version 1 (a flat configuration) still load (:mod:`pes.algos.policy`)."""
+Policy files of version 1 (a flat configuration) still load (:mod:`pes.algos.loading`)."""
 READABLE_POLICY_VERSIONS = (1, 2)
 
 

@@ -17,10 +17,10 @@ import difflib
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from pes.config import check_finite, from_dict, to_dict
 from pes.errors import ConfigError
 from pes.learn.protocol import PROTOCOLS, Protocol, build_protocol, merge, protocol_from_dict
 from pes.sim.config import EnvConfig
+from pes.strict import check_finite, from_dict, to_dict
 
 
 @dataclass

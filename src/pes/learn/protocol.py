@@ -29,8 +29,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from pes.config import check_finite, from_dict, to_dict
 from pes.errors import ConfigError
+from pes.strict import check_finite, from_dict, to_dict
 
 REWARD_KEYS = (
     "self_weight",

@@ -43,7 +43,6 @@ import torch
 import yaml
 from tqdm import tqdm
 
-from pes.config import to_dict
 from pes.errors import CheckpointError, ConfigError, TrainingInterruptedError
 from pes.evaluate import evaluate
 from pes.learn.checkpoint import (
@@ -63,6 +62,7 @@ from pes.learn.learner import Learner
 from pes.lock import folder_lock
 from pes.sim.bench import machine_info
 from pes.sim.env import make_env, resolve_device
+from pes.strict import to_dict
 
 LOG_COLUMNS = (
     "episodes",

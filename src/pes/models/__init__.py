@@ -6,8 +6,8 @@
   (``evader_model="evader-ddpg"``);
 * ``cbc_tp.pt`` / ``cbc_tp.md``: a CBC-TP Net swarm (``pes eval --policy cbc-tp``).
 
-Load them with :func:`pes.algos.policy.load_pursuer_policy` /
-:func:`pes.algos.policy.load_evader_actor` by name.
+Load them with :func:`pes.algos.loading.load_pursuer_policy` /
+:func:`pes.algos.loading.load_evader_actor` by name.
 """
 
 from __future__ import annotations

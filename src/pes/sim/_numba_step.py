@@ -1,7 +1,7 @@
 """The Numba kernels of :mod:`pes.sim.kernels` for the rest of the step (imported on first use
 only): the ``flee`` evader, the collisions, capture, rewards (:mod:`pes.sim.reward`'s terms,
-term by term) and history of :func:`pes.sim.scenario.advance`, and
-:func:`pes.sim.scenario.observe`.
+compiled here with Numba's versions of their helpers) and history of
+:func:`pes.sim.scenario.advance`, and :func:`pes.sim.scenario.observe`.
 
 Each function walks the environments once and repeats the torch code's float32 arithmetic
 operation by operation: every constant arrives as a float32 argument (torch rounds a Python
@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numba.extending import overload, register_jitable
 
 from pes.sim import _numba_substeps as ss
+from pes.sim import reward as terms
 
 _ZERO, _ONE, _TWO = np.float32(0.0), np.float32(1.0), np.float32(2.0)
 _INF, _BIG = np.float32(np.inf), np.float32(1e6)
@@ -170,15 +172,41 @@ def _per_axis(moves):
     return (top if top > _ZERO else _ZERO) + (bottom if bottom < _ZERO else _ZERO)
 
 
-@_jit
-def _softplus_term(distance, safe, k):
-    """``reward.softplus_obstacle_term``: softplus((safe - distance) / k) * k."""
-    z = (safe - distance) / k
-    if z > _SOFTPLUS_LINEAR:
-        return z * k
-    if z < _EXP_ZERO:  # exp(z) rounds to +0 and log1p(+0) is +0: the same bits, no calls
-        return _ZERO * k
-    return np.log1p(np.exp(z)) * k
+# Numba's versions of the helpers that pes.sim.reward's terms call (torch's are in reward.py):
+# float32 in, float32 out, with torch's arithmetic.
+@overload(terms.sqrt)
+def _sqrt(x):
+    return lambda x: np.sqrt(x)
+
+
+@overload(terms.relu)
+def _relu(x):
+    zero = _ZERO if x == numba.types.float32 else 0.0
+    return lambda x: x if x > zero else zero
+
+
+@overload(terms.softplus)
+def _softplus(x):
+    """torch's softplus: linear above 20; below -110 exp rounds to +0 and log1p(+0) is +0."""
+
+    def impl(x):
+        if x > _SOFTPLUS_LINEAR:
+            return x
+        if x < _EXP_ZERO:
+            return _ZERO
+        return np.log1p(np.exp(x))
+
+    return impl
+
+
+# The reward's terms, compiled where ``collide`` calls them.
+for _term in (
+    terms.softplus_obstacle_term,
+    terms.lead_distance,
+    terms.pursuer_reward,
+    terms.evader_reward,
+):
+    register_jitable(error_model="numpy")(_term)
 
 
 @_jit
@@ -437,7 +465,7 @@ def collide(
     w,
 ):
     """The part of :func:`pes.sim.scenario.advance` after the dynamics: collisions, damage,
-    capture, rewards (:mod:`pes.sim.reward`'s terms, in its order) and the history frame.
+    capture, rewards (:mod:`pes.sim.reward`'s terms, per environment) and the history frame.
 
     Args:
         vehicles: (16, E, A) the state before the step; moved: (13, E, A) after the dynamics
@@ -448,7 +476,7 @@ def collide(
             radius_gap: the body radius and the radius a contact pushes out to (m);
             capture_radius (m), capture_count, capture_hold, max_steps: the capture and episode
             rules; disable: crashes disable a pursuer; w: the reward's weights
-            (:class:`pes.sim.kernels.RewardWeights`; :class:`pes.sim.kernels.Constants` names
+            (:class:`pes.sim.reward.RewardWeights`; :class:`pes.sim.kernels.Constants` names
             the others).
 
     Returns the stepped vehicles (16, E, A), counters (7, E), alive (E, N), history, and the
@@ -582,50 +610,43 @@ def collide(
         terminated[e] = success[e] or alive_count < capture_count
         truncated[e] = step >= max_steps and not terminated[e]
         evader_contact[e] = contact[base + n]
-        # Rewards: pes.sim.reward's terms in its order, eqs. (8)-(9) and then the protocol's.
-        paid_sum = _ZERO
+        # Rewards: pes.sim.reward's terms, from this environment's distances and sums.
+        paid_sum, unit_x, unit_y, count = _ZERO, _ZERO, _ZERO, _ZERO
         for i in range(n):
-            paid_sum = paid_sum + distances[e, i] * (_ONE if alive0[e, i] else _ZERO)
-        r_co = w.cooperation * paid_sum
-        unit_x, unit_y, count = _ZERO, _ZERO, _ZERO
-        if w.encirclement != _ZERO:
-            for i in range(n):
-                a0 = _ONE if alive0[e, i] else _ZERO
+            a0 = _ONE if alive0[e, i] else _ZERO
+            paid_sum = paid_sum + distances[e, i] * a0
+            if w.encirclement != _ZERO:
                 gap = distances[e, i] if distances[e, i] > _MIN_GAP else _MIN_GAP
                 unit_x = unit_x + (out_v[0, e, i] - ex) / gap * a0
                 unit_y = unit_y + (out_v[1, e, i] - ey) / gap * a0
                 count = count + a0
-            if count < _ONE:
-                count = _ONE
+        if count < _ONE:
+            count = _ONE
         evx, evy = out_v[2, e, n], out_v[3, e, n]
         for i in range(n):
-            a0 = _ONE if alive0[e, i] else _ZERO
-            own = distances[e, i]
-            if w.lead_on:
-                lead_x = (out_v[0, e, i] - ex) - evx * w.lead
-                lead_y = (out_v[1, e, i] - ey) - evy * w.lead
-                chaser = alive0[e, i] and distances[e, i] == nearest_gap
-                if not chaser:
-                    own = np.sqrt(lead_x * lead_x + lead_y * lead_y)
-            r_self = -(w.self_rho * own + _softplus_term(dist[base + i], w.safe, w.softplus_k))
-            if w.approach != _ZERO:
-                gap = dist[base + i] - radius
-                if gap < _ZERO:
-                    gap = _ZERO
-                over = -inward[base + i] - np.sqrt(w.two_decel * gap)
-                r_self = r_self - w.approach * (over if over > _ZERO else _ZERO)
-            r = r_co + r_self
-            if w.encirclement != _ZERO:
-                r = r - w.encirclement * np.sqrt(unit_x * unit_x + unit_y * unit_y) / count
-            r = r + w.crash * (_ONE if crashed[e, i] else _ZERO)
-            r = r + w.capture * (_ONE if success[e] else _ZERO)
-            reward[e, i] = r * a0
-        gap_paid = nearest_gap if alive0_any else _ZERO
-        evader_reward[e] = (
-            w.rho * gap_paid
-            - _softplus_term(dist[base + n], w.safe, w.softplus_k)
-            + w.evader_crash * (_ONE if contact[base + n] else _ZERO)
-            + w.evader_capture * (_ONE if success[e] else _ZERO)
+            charged = distances[e, i]
+            if w.lead_on and not (alive0[e, i] and distances[e, i] == nearest_gap):
+                dx, dy = out_v[0, e, i] - ex, out_v[1, e, i] - ey
+                charged = terms.lead_distance(dx, dy, evx, evy, w)
+            reward[e, i] = terms.pursuer_reward(
+                w,
+                paid_sum,
+                charged,
+                dist[base + i],
+                inward[base + i],
+                unit_x,
+                unit_y,
+                count,
+                _ONE if crashed[e, i] else _ZERO,
+                _ONE if success[e] else _ZERO,
+                _ONE if alive0[e, i] else _ZERO,
+            )
+        evader_reward[e] = terms.evader_reward(
+            w,
+            nearest_gap if alive0_any else _ZERO,
+            dist[base + n],
+            _ONE if contact[base + n] else _ZERO,
+            _ONE if success[e] else _ZERO,
         )
         out_c[3, e], out_c[4, e], out_c[5, e] = step, hold, counters[5, e] + crash_count
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pes.config import check_types, from_dict, load_yaml, parse_override, strict_keywords
 from pes.errors import ConfigError
+from pes.strict import check_types, from_dict, load_yaml, parse_override, strict_keywords
 
 Dynamics = Literal["quadrotor", "point_mass"]
 CrashMode = Literal["continue", "disable"]

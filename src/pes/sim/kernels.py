@@ -23,7 +23,7 @@ first use only (so that ``import pes`` does not import Numba). Numba compiles th
 machine (some 20-35 s on a 2-core machine) and caches the machine code (beside those files, or in
 ``NUMBA_CACHE_DIR``); a file ``pes-kernels-<key>.ready`` there says that a compilation
 finished for these sources, this Python and this Numba (a compilation for sources without one
-first removes the cached code of both files, as Numba keys each function on its own file only:
+first removes the cached code of those files, as Numba keys each function on its own file only:
 :func:`clear_cache`). When the first step finds no such file it does not wait: a background
 process compiles the kernels while that environment steps in torch; an environment chooses its
 path once, when it is made (:func:`usable`), so a run never switches mid-way, and environments
@@ -50,13 +50,15 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from pes.sim.reward import RewardWeights, reward_weights
+
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
 _step = None  # the module of the step's kernels, once loaded
 _failed = False  # numba is missing or failed: use the torch code
 _child: subprocess.Popen | None = None  # the background compilation this process started
 _next_look = 0.0  # time.monotonic() of the next look at the background compilation
 _LOOK_EVERY = 0.5  # seconds between looks
-_SOURCES = ("_numba_step.py", "_numba_substeps.py")
+_SOURCES = ("_numba_step.py", "_numba_substeps.py", "reward.py")
 
 
 def usable(device: torch.device) -> bool:
@@ -137,12 +139,13 @@ def _cache_folders() -> set[Path]:
 
 def clear_cache(folders) -> None:
     """Remove Numba's cached machine code of the kernels' modules (the index ``.nbi`` and data
-    ``.nbc`` files of ``_numba_step`` and ``_numba_substeps``) from ``folders``, and nothing
-    else. Numba keys a function's cache on its own source file only: ``move`` in
-    _numba_step.py inlines ``block_substeps`` of _numba_substeps.py, and would load the
-    machine code of the old sub-steps after a change of that file alone. So a compilation for
-    sources with no ready marker (:func:`ready_marker` keys on both files) first clears both
-    modules' cache, and compiles every kernel anew."""
+    ``.nbc`` files of ``_numba_step``, ``_numba_substeps`` and ``reward``) from ``folders``, and
+    nothing else. Numba keys a function's cache on its own source file only: ``move`` in
+    _numba_step.py inlines ``block_substeps`` of _numba_substeps.py, ``collide`` the reward's
+    terms of reward.py, and each would load the machine code of the old functions after a
+    change of that file alone. So a compilation for sources with no ready marker
+    (:func:`ready_marker` keys on all three files) first clears all three modules' cache, and
+    compiles every kernel anew."""
     for folder in folders:
         for name in _SOURCES:
             module = name.removesuffix(".py")
@@ -229,7 +232,7 @@ def _compile_here() -> None:
         counters = np.ones((7, 1), np.int64)
         history = np.zeros((1, 2, 2, 4), np.float32)
         rules = (f32(1),) * 6 + (1, 1, 1, True)
-        weights = RewardWeights(*(f32(1),) * 6, True, *(f32(1),) * 7)
+        weights = RewardWeights(*(f32(1),) * 6, True, *(f32(1),) * 8)
         _numba_step.collide(vehicles, cube, alive, alive, counters, history, boxes, *rules, weights)
         # the sub-step kernel of the physics outside a full step (quadrotor_substeps)
         one, state = np.ones((1, 1), np.float32), np.zeros((13, 1, 1), np.float32)
@@ -328,40 +331,6 @@ def _numpy(t: Tensor) -> np.ndarray:
     return t.contiguous().numpy()
 
 
-class RewardWeights(NamedTuple):
-    """The reward's constants as the kernels take them (float32, rounded as the torch code
-    rounds them), for the terms of :mod:`pes.sim.reward` that the collision kernel repeats."""
-
-    rho: np.float32
-    """1 / the arena's diagonal (1/m)."""
-    cooperation: np.float32
-    """-cooperation_weight * rho, eq. (8)."""
-    self_rho: np.float32
-    """self_weight * rho, eq. (9)."""
-    safe: np.float32
-    """d_safe of eq. (9) (m)."""
-    softplus_k: np.float32
-    """k of eq. (9)'s softplus (m)."""
-    lead: np.float32
-    """``intercept_lead`` (s)."""
-    lead_on: bool
-    """Whether ``intercept_lead`` is on."""
-    approach: np.float32
-    """``approach_weight``."""
-    two_decel: np.float32
-    """2 * ``approach_decel`` (m/s^2)."""
-    encirclement: np.float32
-    """``encirclement_weight``."""
-    crash: np.float32
-    """``crash_reward``."""
-    capture: np.float32
-    """``capture_reward``."""
-    evader_crash: np.float32
-    """``evader_crash_reward``."""
-    evader_capture: np.float32
-    """``evader_capture_reward``."""
-
-
 class Constants(NamedTuple):
     """A scenario's constants as the kernels take them (NumPy, float32 unless said), built once
     per :class:`~pes.sim.scenario.Scenario` with the same float32 operations as the torch
@@ -434,22 +403,7 @@ def _constants(sc) -> Constants:
         capture_hold=cfg.capture_hold,
         max_steps=cfg.max_steps,
         disable=cfg.crash_mode == "disable",
-        reward=RewardWeights(
-            rho=f32(1.0 / cfg.arena_diagonal),
-            cooperation=f32(-cfg.cooperation_weight * (1.0 / cfg.arena_diagonal)),
-            self_rho=f32(cfg.self_weight * (1.0 / cfg.arena_diagonal)),
-            safe=f32(cfg.safe_distance),
-            softplus_k=f32(cfg.softplus_k),
-            lead=f32(cfg.intercept_lead),
-            lead_on=bool(cfg.intercept_lead),
-            approach=f32(cfg.approach_weight),
-            two_decel=f32(2.0 * cfg.approach_decel),
-            encirclement=f32(cfg.encirclement_weight),
-            crash=f32(cfg.crash_reward),
-            capture=f32(cfg.capture_reward),
-            evader_crash=f32(cfg.evader_crash_reward),
-            evader_capture=f32(cfg.evader_capture_reward),
-        ),
+        reward=reward_weights(cfg, np.float32),
     )
     sc.kernel_constants = consts
     return consts

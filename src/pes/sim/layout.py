@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pes.config import read_text_file
 from pes.errors import ConfigError
 from pes.sim.config import EnvConfig
+from pes.strict import read_text_file
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,20 @@
 """The step's rewards: every term, the paper's (eqs. 8-9) and the ones a training protocol may
-add, computed from what the physics of a step left (:class:`StepFacts`).
+add, written once for both step paths.
 
-The torch step (:func:`pes.sim.scenario.advance`) calls :func:`pursuer_rewards` and
-:func:`evader_reward`; the compiled CPU kernel of the collisions
-(:func:`pes.sim._numba_step.collide`) repeats these terms in the same order inside its loop
-over the environments, with their constants in :class:`pes.sim.kernels.RewardWeights` (calling
-back into torch from there would double the step's time at small batches: some forty small
-operations). A new term is a function here, a key of :class:`pes.EnvConfig`, a field of
-``RewardWeights`` and its lines in the kernel; ``tests/test_kernels.py`` holds the two paths to
-the same rewards.
+Each term is an elementwise formula of what the physics of a step left and of the reward's
+weights (:class:`RewardWeights`), written with arithmetic and three helpers (:func:`sqrt`,
+:func:`relu`, :func:`softplus`) only, so that the same function runs on tensors (the torch
+step, :func:`rewards`, any batch shape and device) and on the float32 numbers of one
+environment inside the compiled kernel (:func:`pes.sim._numba_step.collide` calls
+:func:`pursuer_reward` and :func:`evader_reward` per environment; Numba compiles them with
+its own versions of the helpers). What the terms read per pursuer (the distances, the
+alive pursuers' sums and the nearest one) each path gathers in its own loop or tensor code:
+:class:`StepFacts` in the torch step.
+
+A new term is a function here, called from :func:`pursuer_reward`, a key of
+:class:`pes.EnvConfig` and a field of :class:`RewardWeights` (:func:`reward_weights`);
+``tests/test_kernels.py`` holds the two paths to the same rewards (a change of this file
+compiles the kernels anew: :func:`pes.sim.kernels.ready_marker` keys on it).
 
 Shapes: E environments, N pursuers; distances in metres, speeds in m/s. A pursuer earns its
 reward for a step if it was alive when the step began.
@@ -18,15 +24,160 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
 import torch
 from torch import Tensor
-from torch.nn.functional import softplus
+from torch.nn import functional
 
 from pes.sim.config import EnvConfig
 
 
+class RewardWeights(NamedTuple):
+    """The reward's constants, rounded to float32 as the step's arithmetic uses them: Python
+    floats for the torch step, NumPy float32 for the kernel (:func:`reward_weights`)."""
+
+    rho: float
+    """1 / the arena's diagonal (1/m)."""
+    cooperation: float
+    """-cooperation_weight * rho, eq. (8)."""
+    self_rho: float
+    """self_weight * rho, eq. (9)."""
+    safe: float
+    """d_safe of eq. (9) (m)."""
+    softplus_k: float
+    """k of eq. (9)'s softplus (m)."""
+    lead: float
+    """``intercept_lead`` (s)."""
+    lead_on: bool
+    """Whether ``intercept_lead`` is on."""
+    approach: float
+    """``approach_weight``."""
+    two_decel: float
+    """2 * ``approach_decel`` (m/s^2)."""
+    radius: float
+    """The body radius (m): the approach term's gap is measured from it."""
+    encirclement: float
+    """``encirclement_weight``."""
+    crash: float
+    """``crash_reward``."""
+    capture: float
+    """``capture_reward``."""
+    evader_crash: float
+    """``evader_crash_reward``."""
+    evader_capture: float
+    """``evader_capture_reward``."""
+
+
+def reward_weights(cfg: EnvConfig, number: type = float) -> RewardWeights:
+    """The :class:`RewardWeights` of ``cfg``, each value rounded to float32 and held as
+    ``number`` (``float`` for the torch step, ``np.float32`` for the kernel)."""
+    rho = 1.0 / cfg.arena_diagonal
+
+    def f32(value: float):
+        return number(np.float32(value))
+
+    return RewardWeights(
+        rho=f32(rho),
+        cooperation=f32(-cfg.cooperation_weight * rho),
+        self_rho=f32(cfg.self_weight * rho),
+        safe=f32(cfg.safe_distance),
+        softplus_k=f32(cfg.softplus_k),
+        lead=f32(cfg.intercept_lead),
+        lead_on=bool(cfg.intercept_lead),
+        approach=f32(cfg.approach_weight),
+        two_decel=f32(2.0 * cfg.approach_decel),
+        radius=f32(cfg.body_radius),
+        encirclement=f32(cfg.encirclement_weight),
+        crash=f32(cfg.crash_reward),
+        capture=f32(cfg.capture_reward),
+        evader_crash=f32(cfg.evader_crash_reward),
+        evader_capture=f32(cfg.evader_capture_reward),
+    )
+
+
+# The helpers the terms may call: torch's here, Numba's in pes.sim._numba_step.
+def sqrt(x: Tensor) -> Tensor:
+    """The square root, elementwise."""
+    return torch.sqrt(x)
+
+
+def relu(x: Tensor) -> Tensor:
+    """max(x, 0), elementwise."""
+    return x.clamp(min=0.0)
+
+
+def softplus(x: Tensor) -> Tensor:
+    """log(1 + exp(x)), elementwise, linear above 20 (torch's threshold)."""
+    return functional.softplus(x)
+
+
+# The terms: elementwise formulas, the same on tensors and on one environment's numbers.
+def softplus_obstacle_term(distance, safe_distance, k):
+    """k * log(exp(0) + exp((d_safe - d_obs) / k)) of eq. (9), computed without overflow for
+    any distance (also negative, inside a wall); ``distance`` and the result in metres."""
+    return softplus((safe_distance - distance) / k) * k
+
+
+def lead_distance(dx, dy, evader_vx, evader_vy, w: RewardWeights):
+    """Not in the paper (``intercept_lead``): a pursuer's distance (m) to the evader's lead
+    point, ``w.lead`` seconds ahead at its current velocity; ``dx, dy`` the pursuer's position
+    minus the evader's (m), ``evader_vx, evader_vy`` the evader's velocity (m/s)."""
+    lead_x = dx - evader_vx * w.lead
+    lead_y = dy - evader_vy * w.lead
+    return sqrt(lead_x * lead_x + lead_y * lead_y)
+
+
+def pursuer_reward(
+    w: RewardWeights,
+    paid_sum,
+    charged,
+    obstacle,
+    inward,
+    unit_x,
+    unit_y,
+    count,
+    crashed,
+    success,
+    alive0,
+):
+    """One pursuer's reward for a step.
+
+    Eq. (8), the cooperation term: ``w.cooperation`` times ``paid_sum``, the alive pursuers'
+    summed distance to the evader (m). Eq. (9): minus ``w.self_rho`` times ``charged``, the
+    pursuer's own distance (m), minus the softplus term of its nearest obstacle at
+    ``obstacle`` m. Not in the paper: the approach term (``w.approach``: the speed at which it
+    closed on that obstacle, minus ``inward`` <= 0 m/s, above the speed it could still brake
+    from in its gap) and the encirclement term (``w.encirclement``: the length of the mean of
+    the unit vectors from the evader to the alive pursuers, summed ``unit_x``, ``unit_y`` over
+    their ``count``). Then the crash and capture rewards; ``crashed``, ``success`` and
+    ``alive0`` (alive when the step began: else the reward is 0) are 1 or 0.
+    """
+    own = -(w.self_rho * charged + softplus_obstacle_term(obstacle, w.safe, w.softplus_k))
+    if w.approach != 0:
+        brakeable = sqrt(w.two_decel * relu(obstacle - w.radius))
+        own = own - w.approach * relu(-inward - brakeable)
+    reward = w.cooperation * paid_sum + own
+    if w.encirclement != 0:
+        reward = reward - w.encirclement * sqrt(unit_x * unit_x + unit_y * unit_y) / count
+    reward = reward + w.crash * crashed
+    reward = reward + w.capture * success
+    return reward * alive0
+
+
+def evader_reward(w: RewardWeights, nearest_gap, obstacle, contact, success):
+    """The evader's reward for a step: the nearest alive pursuer's distance ``nearest_gap``
+    (m; 0 with none alive) times ``w.rho``, minus the softplus term of its nearest obstacle
+    at ``obstacle`` m, plus its crash and capture rewards (``contact``, ``success``: 1 or 0)."""
+    return (
+        w.rho * nearest_gap
+        - softplus_obstacle_term(obstacle, w.safe, w.softplus_k)
+        + w.evader_crash * contact
+        + w.evader_capture * success
+    )
+
+
 class StepFacts(NamedTuple):
-    """What one control step left, for its rewards."""
+    """What one control step left, for its rewards (the torch step)."""
 
     alive0: Tensor
     """(E, N) bool: the pursuers alive when the step began."""
@@ -57,96 +208,40 @@ class StepFacts(NamedTuple):
     """(E,) bool: the evader touched an obstacle in this step."""
 
 
-def softplus_obstacle_term(obstacle_dist: Tensor, safe_distance: float, k: float) -> Tensor:
-    """k * log(exp(0) + exp((d_safe - d_obs) / k)) of eq. (9), computed without overflow for
-    any distance (also negative, inside a wall); (...) in metres."""
-    return softplus((safe_distance - obstacle_dist) / k) * k
-
-
-def cooperation(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """Eq. (8): minus the alive pursuers' summed distance to the evader, over the arena's
-    diagonal, times ``cooperation_weight``; (E, 1), the same for every pursuer."""
-    rho = 1.0 / cfg.arena_diagonal
-    alive0 = facts.alive0.to(facts.paid.dtype)
-    return -cfg.cooperation_weight * rho * (facts.paid * alive0).sum(-1, keepdim=True)
-
-
-def own_distance(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """The distance eq. (9) charges each pursuer (E, N) m: its own to the evader or, with
-    ``intercept_lead`` (not in the paper), for all but the nearest alive pursuer the distance
-    to the evader's lead point, ``intercept_lead`` seconds ahead at its current velocity."""
-    if not cfg.intercept_lead:
-        return facts.paid
-    lead_x = facts.dx - facts.evader_vx * cfg.intercept_lead
-    lead_y = facts.dy - facts.evader_vy * cfg.intercept_lead
-    to_lead = torch.sqrt(lead_x * lead_x + lead_y * lead_y)
-    chaser = facts.alive0 & (facts.distances == nearest_gap(facts))
-    return torch.where(chaser, facts.paid, to_lead)
-
-
-def nearest_gap(facts: StepFacts) -> Tensor:
-    """(E, 1) m: the nearest alive pursuer's distance to the evader (inf if none is alive)."""
-    return torch.where(facts.alive0, facts.distances, float("inf")).amin(-1, keepdim=True)
-
-
-def own_term(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """Eq. (9), (E, N): minus ``self_weight`` times the charged distance over the arena's
-    diagonal, minus the softplus obstacle term of the pursuer's nearest obstacle."""
-    n = cfg.num_pursuers
-    rho = 1.0 / cfg.arena_diagonal
-    obstacle = softplus_obstacle_term(facts.obstacle[:, :n], cfg.safe_distance, cfg.softplus_k)
-    return -(cfg.self_weight * rho * own_distance(cfg, facts) + obstacle)
-
-
-def approach(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """Not in the paper (``approach_weight``), (E, N): minus the speed at which each pursuer
-    closed on its nearest obstacle above the speed it could still brake from in its gap."""
-    n = cfg.num_pursuers
-    gap = (facts.obstacle[:, :n] - cfg.body_radius).clamp(min=0.0)
-    brakeable = torch.sqrt(2.0 * cfg.approach_decel * gap)
-    return -cfg.approach_weight * (-facts.inward[:, :n] - brakeable).clamp(min=0.0)
-
-
-def encirclement(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """Not in the paper (``encirclement_weight``), (E, 1): minus how one-sided the alive
-    pursuers are seen from the evader, the length of the mean of the unit vectors towards them
-    (in [0, 1])."""
-    alive0 = facts.alive0.to(facts.dx.dtype)
-    gap = facts.distances.clamp(min=1e-6)
-    unit_x = (facts.dx / gap * alive0).sum(-1, keepdim=True)
-    unit_y = (facts.dy / gap * alive0).sum(-1, keepdim=True)
-    count = alive0.sum(-1, keepdim=True).clamp(min=1.0)
-    return -cfg.encirclement_weight * torch.sqrt(unit_x**2 + unit_y**2) / count
-
-
-def pursuer_rewards(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """Each pursuer's reward for the step (E, N): eqs. (8)-(9), the optional terms, the crash
-    and capture rewards; 0 for pursuers dead when the step began."""
+def rewards(w: RewardWeights, facts: StepFacts) -> tuple[Tensor, Tensor]:
+    """The step's rewards on tensors: the pursuers' (E, N) and the evader's (E,), from the
+    facts of the whole batch (:func:`pursuer_reward`, :func:`evader_reward`)."""
+    n = facts.alive0.shape[-1]
     dtype = facts.distances.dtype
-    own = own_term(cfg, facts)
-    if cfg.approach_weight:
-        own = own + approach(cfg, facts)
-    reward = cooperation(cfg, facts) + own
-    if cfg.encirclement_weight:
-        reward = reward + encirclement(cfg, facts)
-    reward = (
-        reward
-        + cfg.crash_reward * facts.crashed.to(dtype)
-        + cfg.capture_reward * facts.success.unsqueeze(-1).to(dtype)
+    alive0 = facts.alive0.to(dtype)
+    gaps = torch.where(facts.alive0, facts.distances, float("inf"))
+    nearest = gaps.amin(-1, keepdim=True)  # (E, 1), inf with none alive
+    charged = facts.paid
+    if w.lead_on:  # all but the nearest alive pursuer are charged the lead point's distance
+        lead = lead_distance(facts.dx, facts.dy, facts.evader_vx, facts.evader_vy, w)
+        chaser = facts.alive0 & (facts.distances == nearest)
+        charged = torch.where(chaser, facts.paid, lead)
+    unit_x = unit_y = count = None
+    if w.encirclement != 0:
+        gap = facts.distances.clamp(min=1e-6)
+        unit_x = (facts.dx / gap * alive0).sum(-1, keepdim=True)
+        unit_y = (facts.dy / gap * alive0).sum(-1, keepdim=True)
+        count = alive0.sum(-1, keepdim=True).clamp(min=1.0)
+    pursuers = pursuer_reward(
+        w,
+        (facts.paid * alive0).sum(-1, keepdim=True),
+        charged,
+        facts.obstacle[:, :n],
+        facts.inward[:, :n],
+        unit_x,
+        unit_y,
+        count,
+        facts.crashed.to(dtype),
+        facts.success.unsqueeze(-1).to(dtype),
+        alive0,
     )
-    return reward * facts.alive0.to(dtype)
-
-
-def evader_reward(cfg: EnvConfig, facts: StepFacts) -> Tensor:
-    """The evader's reward (E,): the nearest alive pursuer's distance over the arena's
-    diagonal (0 with none alive), minus its obstacle term, plus its crash and capture
-    rewards."""
-    dtype = facts.distances.dtype
-    gap = torch.where(facts.alive0.any(-1), nearest_gap(facts)[:, 0], 0.0)
-    obstacle = softplus_obstacle_term(facts.obstacle[:, -1], cfg.safe_distance, cfg.softplus_k)
-    return (
-        1.0 / cfg.arena_diagonal * gap
-        - obstacle
-        + cfg.evader_crash_reward * facts.evader_contact.to(dtype)
-        + cfg.evader_capture_reward * facts.success.to(dtype)
+    gap = torch.where(facts.alive0.any(-1), nearest[:, 0], 0.0)
+    evader = evader_reward(
+        w, gap, facts.obstacle[:, -1], facts.evader_contact.to(dtype), facts.success.to(dtype)
     )
+    return pursuers, evader

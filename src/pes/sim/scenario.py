@@ -57,7 +57,7 @@ from pes.sim.geometry import (
     pick_nearest,
 )
 from pes.sim.layout import Layout, make_layout
-from pes.sim.reward import StepFacts, evader_reward, pursuer_rewards
+from pes.sim.reward import RewardWeights, StepFacts, reward_weights, rewards
 
 OBS_FEATURES = 8
 """Numbers per row of an observation (Table I)."""
@@ -133,6 +133,7 @@ class Scenario:
     # from memory, not torch.arange in the step: Inductor folds an arange into a CUDA kernel's
     # int32 index arithmetic, where Triton refuses the hash's constants above 2**31.
     vehicle: Tensor
+    reward_weights: RewardWeights  # the reward's constants (pes.sim.reward)
     evader_policy: EvaderPolicy | None = field(default=None)
     roadmap: Roadmap | None = field(default=None)  # distance_metric="geodesic" only
     kernels: bool = False  # steps with pes.sim.kernels (chosen when the environment is made)
@@ -214,6 +215,7 @@ def build_scenario(config: EnvConfig, device: torch.device) -> Scenario:
         other_index=others,
         vel_scale=config.pursuer_max_speed,
         vehicle=torch.arange(config.num_vehicles, device=device),
+        reward_weights=reward_weights(config),
         kernels=kernels.usable(device),
     )
     if config.distance_metric == "geodesic":
@@ -586,6 +588,7 @@ def advance(
         evader_contact=contact[:, -1],
     )
 
+    reward, evader_reward = rewards(sc.reward_weights, facts)
     crashes = c.crashes + crashed.sum(-1)
     counters = c._replace(step=step, hold=hold, crashes=crashes)
     frame = history_frame(sc, moved, alive)
@@ -595,8 +598,8 @@ def advance(
         "steps": step,
         "crashes": crashes,
         "alive": alive,
-        "reward": pursuer_rewards(cfg, facts),
-        "evader_reward": evader_reward(cfg, facts),
+        "reward": reward,
+        "evader_reward": evader_reward,
         "terminated": terminated,
         "truncated": truncated,
         "success": success,
