@@ -349,9 +349,9 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
     made: list[tuple[str, str]] = []
     curves = _curves(out, specs, done)
     training = (
-        "training episodes (exploration noise on, crashes continue, no disturbance, the "
-        "training reward of each method's preset), mean ± std over seeds (success-rate bands "
-        "cut at 0 %), one point per log row"
+        "training episodes (as each method trained: its exploration, its protocol's training "
+        "reward, disturbance and crash rule of the moment), mean ± std over seeds "
+        "(success-rate bands cut at 0 %), one point per log row"
     )
     panels = (
         ("fig6_success_rate.png", "success_rate", "success rate (%)", 100.0, "Fig. 6"),
