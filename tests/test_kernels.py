@@ -207,3 +207,19 @@ def test_a_new_compilation_clears_the_cached_code_of_both_kernel_modules_and_not
         (tmp_path / name).touch()
     kernels.clear_cache([tmp_path, tmp_path / "missing"])
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept)
+
+
+def test_the_ready_marker_keys_on_every_file_the_kernels_compile_from():
+    """A module of PES whose functions the kernels call (the reward's terms, the sub-steps) is
+    compiled into their cached machine code: a change of it must need a new ready marker, or
+    the kernels would run its old code."""
+    import ast
+
+    here = Path(kernels.__file__).parent
+    compiled = set()
+    for name in ("_numba_step.py", "_numba_substeps.py"):
+        for node in ast.walk(ast.parse((here / name).read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module == "pes.sim":
+                compiled.update(f"{alias.name}.py" for alias in node.names)
+    assert compiled == {"_numba_substeps.py", "reward.py"}
+    assert compiled <= set(kernels._SOURCES)

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 import torch
 
-from pes.algos.policy import load_pursuer_policy
+from pes.algos.loading import load_pursuer_policy
 from pes.evaluate import evaluate
 from pes.sim import scenario
 from pes.sim.config import EnvConfig

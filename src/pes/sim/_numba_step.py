@@ -182,7 +182,7 @@ def _sqrt(x):
 @overload(terms.relu)
 def _relu(x):
     zero = _ZERO if x == numba.types.float32 else 0.0
-    return lambda x: x if x > zero else zero
+    return lambda x: zero if x < zero else x  # as torch's clamp: NaN and -0.0 kept
 
 
 @overload(terms.softplus)

@@ -50,7 +50,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pes.sim.reward import RewardWeights, reward_weights
+from pes.sim.reward import RewardWeights
 
 _ENABLED = os.environ.get("PES_KERNELS", "1") != "0"
 _step = None  # the module of the step's kernels, once loaded
@@ -59,6 +59,9 @@ _child: subprocess.Popen | None = None  # the background compilation this proces
 _next_look = 0.0  # time.monotonic() of the next look at the background compilation
 _LOOK_EVERY = 0.5  # seconds between looks
 _SOURCES = ("_numba_step.py", "_numba_substeps.py", "reward.py")
+"""The files the kernels are compiled from (``_numba_step`` compiles reward.py's terms)."""
+_CACHED = ("_numba_step", "_numba_substeps")
+"""The modules whose functions Numba caches (reward.py's terms are cached inside theirs)."""
 
 
 def usable(device: torch.device) -> bool:
@@ -139,16 +142,15 @@ def _cache_folders() -> set[Path]:
 
 def clear_cache(folders) -> None:
     """Remove Numba's cached machine code of the kernels' modules (the index ``.nbi`` and data
-    ``.nbc`` files of ``_numba_step``, ``_numba_substeps`` and ``reward``) from ``folders``, and
-    nothing else. Numba keys a function's cache on its own source file only: ``move`` in
+    ``.nbc`` files of ``_numba_step`` and ``_numba_substeps``) from ``folders``, and nothing
+    else. Numba keys a function's cache on its own source file only: ``move`` in
     _numba_step.py inlines ``block_substeps`` of _numba_substeps.py, ``collide`` the reward's
     terms of reward.py, and each would load the machine code of the old functions after a
     change of that file alone. So a compilation for sources with no ready marker
-    (:func:`ready_marker` keys on all three files) first clears all three modules' cache, and
+    (:func:`ready_marker` keys on all three files) first clears both modules' cache, and
     compiles every kernel anew."""
     for folder in folders:
-        for name in _SOURCES:
-            module = name.removesuffix(".py")
+        for module in _CACHED:
             for pattern in (f"{module}.*.nbi", f"{module}.*.nbc"):
                 for path in Path(folder).glob(pattern):
                     # another process may have removed it first
@@ -403,7 +405,7 @@ def _constants(sc) -> Constants:
         capture_hold=cfg.capture_hold,
         max_steps=cfg.max_steps,
         disable=cfg.crash_mode == "disable",
-        reward=reward_weights(cfg, np.float32),
+        reward=sc.reward_weights.as_float32(),
     )
     sc.kernel_constants = consts
     return consts

@@ -11,8 +11,10 @@ its own versions of the helpers). What the terms read per pursuer (the distances
 alive pursuers' sums and the nearest one) each path gathers in its own loop or tensor code:
 :class:`StepFacts` in the torch step.
 
-A new term is a function here, called from :func:`pursuer_reward`, a key of
-:class:`pes.EnvConfig` and a field of :class:`RewardWeights` (:func:`reward_weights`);
+A new term is a function here, called from :func:`pursuer_reward` (or :func:`evader_reward`),
+a key of :class:`pes.EnvConfig` and a field of :class:`RewardWeights` set in
+:func:`reward_weights`; a term that needs a new quantity gathered across the pursuers (a sum,
+the nearest one) needs it in both gatherings as well, :func:`rewards` and the kernel's loop.
 ``tests/test_kernels.py`` holds the two paths to the same rewards (a change of this file
 compiles the kernels anew: :func:`pes.sim.kernels.ready_marker` keys on it).
 
@@ -22,7 +24,7 @@ reward for a step if it was alive when the step began.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar, Union
 
 import numpy as np
 import torch
@@ -31,10 +33,15 @@ from torch.nn import functional
 
 from pes.sim.config import EnvConfig
 
+Value = TypeVar("Value", bound=Union[Tensor, float, np.float32])
+"""What a term computes on: a tensor (the torch step, any shape) or one float32 number (the
+kernel)."""
+
 
 class RewardWeights(NamedTuple):
     """The reward's constants, rounded to float32 as the step's arithmetic uses them: Python
-    floats for the torch step, NumPy float32 for the kernel (:func:`reward_weights`)."""
+    floats for the torch step (:func:`reward_weights`), NumPy float32 for the kernel
+    (:meth:`as_float32`)."""
 
     rho: float
     """1 / the arena's diagonal (1/m)."""
@@ -67,14 +74,20 @@ class RewardWeights(NamedTuple):
     evader_capture: float
     """``evader_capture_reward``."""
 
+    def as_float32(self) -> RewardWeights:
+        """The same weights as NumPy float32 numbers, for the kernel's float32 arithmetic."""
+        return RewardWeights(
+            *(v if isinstance(v, bool) else np.float32(v) for v in self)  # type: ignore[arg-type]
+        )
 
-def reward_weights(cfg: EnvConfig, number: type = float) -> RewardWeights:
-    """The :class:`RewardWeights` of ``cfg``, each value rounded to float32 and held as
-    ``number`` (``float`` for the torch step, ``np.float32`` for the kernel)."""
+
+def reward_weights(cfg: EnvConfig) -> RewardWeights:
+    """The :class:`RewardWeights` of ``cfg``: each value rounded to float32 (as torch rounds a
+    Python scalar to a float32 tensor's dtype), held as a Python float."""
     rho = 1.0 / cfg.arena_diagonal
 
-    def f32(value: float):
-        return number(np.float32(value))
+    def f32(value: float) -> float:
+        return float(np.float32(value))
 
     return RewardWeights(
         rho=f32(rho),
@@ -112,13 +125,15 @@ def softplus(x: Tensor) -> Tensor:
 
 
 # The terms: elementwise formulas, the same on tensors and on one environment's numbers.
-def softplus_obstacle_term(distance, safe_distance, k):
+def softplus_obstacle_term(distance: Value, safe_distance: float, k: float) -> Value:
     """k * log(exp(0) + exp((d_safe - d_obs) / k)) of eq. (9), computed without overflow for
     any distance (also negative, inside a wall); ``distance`` and the result in metres."""
     return softplus((safe_distance - distance) / k) * k
 
 
-def lead_distance(dx, dy, evader_vx, evader_vy, w: RewardWeights):
+def lead_distance(
+    dx: Value, dy: Value, evader_vx: Value, evader_vy: Value, w: RewardWeights
+) -> Value:
     """Not in the paper (``intercept_lead``): a pursuer's distance (m) to the evader's lead
     point, ``w.lead`` seconds ahead at its current velocity; ``dx, dy`` the pursuer's position
     minus the evader's (m), ``evader_vx, evader_vy`` the evader's velocity (m/s)."""
@@ -129,17 +144,17 @@ def lead_distance(dx, dy, evader_vx, evader_vy, w: RewardWeights):
 
 def pursuer_reward(
     w: RewardWeights,
-    paid_sum,
-    charged,
-    obstacle,
-    inward,
-    unit_x,
-    unit_y,
-    count,
-    crashed,
-    success,
-    alive0,
-):
+    paid_sum: Value,
+    charged: Value,
+    obstacle: Value,
+    inward: Value,
+    unit_x: Value | None,
+    unit_y: Value | None,
+    count: Value | None,
+    crashed: Value,
+    success: Value,
+    alive0: Value,
+) -> Value:
     """One pursuer's reward for a step.
 
     Eq. (8), the cooperation term: ``w.cooperation`` times ``paid_sum``, the alive pursuers'
@@ -149,8 +164,9 @@ def pursuer_reward(
     closed on that obstacle, minus ``inward`` <= 0 m/s, above the speed it could still brake
     from in its gap) and the encirclement term (``w.encirclement``: the length of the mean of
     the unit vectors from the evader to the alive pursuers, summed ``unit_x``, ``unit_y`` over
-    their ``count``). Then the crash and capture rewards; ``crashed``, ``success`` and
-    ``alive0`` (alive when the step began: else the reward is 0) are 1 or 0.
+    their ``count``; unused, and may be None, where ``w.encirclement`` is 0). Then the crash
+    and capture rewards; ``crashed``, ``success`` and ``alive0`` (alive when the step began:
+    else the reward is 0) are 1 or 0.
     """
     own = -(w.self_rho * charged + softplus_obstacle_term(obstacle, w.safe, w.softplus_k))
     if w.approach != 0:
@@ -164,7 +180,9 @@ def pursuer_reward(
     return reward * alive0
 
 
-def evader_reward(w: RewardWeights, nearest_gap, obstacle, contact, success):
+def evader_reward(
+    w: RewardWeights, nearest_gap: Value, obstacle: Value, contact: Value, success: Value
+) -> Value:
     """The evader's reward for a step: the nearest alive pursuer's distance ``nearest_gap``
     (m; 0 with none alive) times ``w.rho``, minus the softplus term of its nearest obstacle
     at ``obstacle`` m, plus its crash and capture rewards (``contact``, ``success``: 1 or 0)."""
