@@ -39,9 +39,9 @@ kernel)."""
 
 
 class RewardWeights(NamedTuple):
-    """The reward's constants, rounded to float32 as the step's arithmetic uses them: Python
-    floats for the torch step (:func:`reward_weights`), NumPy float32 for the kernel
-    (:meth:`as_float32`)."""
+    """The reward's constants: Python floats for the torch step (:func:`reward_weights`; torch
+    rounds each to a tensor's dtype as it operates), NumPy float32 for the kernel
+    (:meth:`as_float32`, rounded as torch rounds them for float32 tensors)."""
 
     rho: float
     """1 / the arena's diagonal (1/m)."""
@@ -82,29 +82,24 @@ class RewardWeights(NamedTuple):
 
 
 def reward_weights(cfg: EnvConfig) -> RewardWeights:
-    """The :class:`RewardWeights` of ``cfg``: each value rounded to float32 (as torch rounds a
-    Python scalar to a float32 tensor's dtype), held as a Python float."""
+    """The :class:`RewardWeights` of ``cfg``, as Python floats."""
     rho = 1.0 / cfg.arena_diagonal
-
-    def f32(value: float) -> float:
-        return float(np.float32(value))
-
     return RewardWeights(
-        rho=f32(rho),
-        cooperation=f32(-cfg.cooperation_weight * rho),
-        self_rho=f32(cfg.self_weight * rho),
-        safe=f32(cfg.safe_distance),
-        softplus_k=f32(cfg.softplus_k),
-        lead=f32(cfg.intercept_lead),
+        rho=rho,
+        cooperation=-cfg.cooperation_weight * rho,
+        self_rho=cfg.self_weight * rho,
+        safe=cfg.safe_distance,
+        softplus_k=cfg.softplus_k,
+        lead=cfg.intercept_lead,
         lead_on=bool(cfg.intercept_lead),
-        approach=f32(cfg.approach_weight),
-        two_decel=f32(2.0 * cfg.approach_decel),
-        radius=f32(cfg.body_radius),
-        encirclement=f32(cfg.encirclement_weight),
-        crash=f32(cfg.crash_reward),
-        capture=f32(cfg.capture_reward),
-        evader_crash=f32(cfg.evader_crash_reward),
-        evader_capture=f32(cfg.evader_capture_reward),
+        approach=cfg.approach_weight,
+        two_decel=2.0 * cfg.approach_decel,
+        radius=cfg.body_radius,
+        encirclement=cfg.encirclement_weight,
+        crash=cfg.crash_reward,
+        capture=cfg.capture_reward,
+        evader_crash=cfg.evader_crash_reward,
+        evader_capture=cfg.evader_capture_reward,
     )
 
 
