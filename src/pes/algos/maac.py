@@ -161,7 +161,12 @@ class SquashedGaussianActor(nn.Module):
 
     def sample(self, obs: Tensor, mask: Tensor, gen: torch.Generator) -> tuple[Tensor, Tensor]:
         """Reparameterised actions (B, N, 2) in (-1, 1) and their log-probabilities (B, N)."""
-        mean, log_std = self(obs, mask)
+        return self.squash(*self(obs, mask), gen)
+
+    @staticmethod
+    def squash(mean: Tensor, log_std: Tensor, gen: torch.Generator) -> tuple[Tensor, Tensor]:
+        """Actions (B, N, 2) sampled from the policy with pre-tanh ``mean`` and ``log_std`` (each
+        (B, N, 2)), and their log-probabilities (B, N)."""
         eps = torch.randn(mean.shape, generator=gen).to(mean.device)
         u = mean + eps * log_std.exp()
         # log pi(a) = log N(u) - sum log(1 - tanh(u)^2), written stably
@@ -323,11 +328,11 @@ class MAAC(Learner):
     def act(self, obs: Tensor, info: dict[str, Tensor], noise_scale: float, gen):
         """(E, N, 2) actions sampled from the policies (the mean in the ``greedy_envs`` share of
         the environments), or the demonstrator's while it plays; no evader actions."""
-        sample = self.actor.sample(obs, info["obs_mask"], gen)[0]
+        mean, log_std = self.actor(obs, info["obs_mask"])
+        sample = self.actor.squash(mean, log_std, gen)[0]
         if self.demonstrating():
             return self.demo(obs, info).clamp(-1.0, 1.0), None
-        mean = self.actor.mean_action(obs, info["obs_mask"])
-        return torch.where(self.explore, sample, mean), None
+        return torch.where(self.explore, sample, torch.tanh(mean)), None
 
     def record(self, before, actions, evader_actions, reward, terminated, after) -> None:
         """Store one vector step: ``before``/``after`` are the infos around ``env.step``."""
@@ -380,7 +385,8 @@ class MAAC(Learner):
         optimise(self.opt_critic, critic_loss, self.critics.parameters(), cfg.grad_clip)
 
         obs, mask = pursuer_obs(state, alive)
-        new_action, logp = self.actor.sample(obs, mask, gen)
+        mean, log_std = self.actor(obs, mask)
+        new_action, logp = self.actor.squash(mean, log_std, gen)
         self.critics.requires_grad_(False)
         q_pi = torch.min(
             *(c(state, alive, new_action.detach(), new_action)[0] for c in self.critics)
@@ -397,8 +403,7 @@ class MAAC(Learner):
             optimise(self.opt_alpha, alpha_loss, self.temperature.parameters(), 0.0)
         soft_update(self.critics_target, self.critics, cfg.tau)
         self.updates += 1
-        with torch.no_grad():
-            std = self.actor(obs, mask)[1].exp().mean(-1)
+        std = log_std.detach().exp().mean(-1)  # the policy's spread before this update
         return {
             "critic_loss": float(critic_loss.detach()),
             "actor_loss": float(actor_loss.detach()),
