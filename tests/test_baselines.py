@@ -152,9 +152,7 @@ def test_baseline_config_errors():
 LEARNING = {
     "ppo": dict(episodes=400, num_envs=16, rollout_steps=32, batch_size=64, hidden=64),
     "mappo": dict(episodes=400, num_envs=16, rollout_steps=32, batch_size=64, hidden=64),
-    # under the pes protocol's aids MAAC learnt to capture here only 10 % of the time, crashing
-    # (2.45 crashes an episode): its test trains under the paper's protocol
-    "maac": dict(episodes=200, protocol="paper"),
+    "maac": dict(episodes=200),
 }
 
 

@@ -2,14 +2,15 @@
 continuous actions as a soft actor-critic (Haarnoja et al., 2018) with squashed Gaussian
 policies, off-policy on the shared replay storage.
 
-Critic (:class:`AttentionCritic`, MAAC's Fig. 1): every pursuer j has a state encoding
-e_j = g(s_j) and a state-action encoding f(s_j, a_j), where s_j is its global-state row (Table
-I self row), the evader's [position, velocity, obstacle vector] and an alive flag. Pursuer i's
-Q is ``head(e_i, x_i, a_i)``, with x_i the multi-head attention of its query (from e_i) over the
-keys and values of the *other alive* pursuers' state-action encodings. The original's critic
-outputs one Q per discrete action; with continuous actions the head takes a_i as an input
-instead. Encoders and heads are per pursuer with ``shared=False`` (as the original; the
-attention weights are always shared), one for all with ``shared=True`` (the default).
+Critic (:class:`AttentionCritic`, MAAC's Fig. 1 and eq. 2, Q_i(o, a) = f_i(g_i(o_i, a_i), x_i)):
+every pursuer j has an encoding e_j = g(s_j, a_j) of its state and action, where s_j is its
+global-state row (Table I self row), the evader's [position, velocity, obstacle vector] and an
+alive flag. Pursuer i's Q is ``head(e_i, x_i)``, with x_i the multi-head attention of its query
+(from e_i) over the keys and values of the *other alive* pursuers' encodings. The original's
+code, written for discrete actions, encodes agent i's state alone and outputs one Q per action;
+with continuous actions agent i's own action enters through e_i, as the paper's eq. 2 writes
+it. Encoders and heads are per pursuer with ``shared=False`` (as the original; the attention
+weights are always shared), one for all with ``shared=True`` (the default).
 
 One update (every ``update_every`` transitions after ``warmup``):
 
@@ -200,12 +201,11 @@ class AttentionCritic(RowScaled):
         def encoder(inputs: int):
             return lambda: nn.Sequential(nn.Linear(inputs, h), nn.LeakyReLU())
 
-        self.state_encoder = PerAgent(encoder(row), n, lc.shared)
-        self.state_action_encoder = PerAgent(encoder(row + 2), n, lc.shared)
+        self.encoder = PerAgent(encoder(row + 2), n, lc.shared)
         self.query = nn.Linear(h, h, bias=False)
         self.key = nn.Linear(h, h, bias=False)
         self.value = nn.Sequential(nn.Linear(h, h), nn.LeakyReLU())
-        self.head = PerAgent(lambda: mlp([2 * h + 2, h, 1]), n, lc.shared)
+        self.head = PerAgent(lambda: mlp([2 * h, h, 1]), n, lc.shared)
 
     def forward(
         self, state: Tensor, alive: Tensor, actions: Tensor, own_actions: Tensor | None = None
@@ -215,9 +215,9 @@ class AttentionCritic(RowScaled):
         Args:
             state: (B, A, 8) global states; alive: (B, N) bool.
             actions: (B, N, 2) the actions the other pursuers' keys and values see.
-            own_actions: (B, N, 2) the action each pursuer's own head sees (default
-                ``actions``); the actor update passes its new actions here and their detached
-                copy as ``actions``.
+            own_actions: (B, N, 2) the action in each pursuer's own encoding, which makes its
+                query and enters its head (default ``actions``); the actor update passes its
+                new actions here and their detached copy as ``actions``.
 
         Returns:
             Q (B, N) and the squared attention logits averaged over the attended pairs (a
@@ -228,9 +228,8 @@ class AttentionCritic(RowScaled):
         scaled = state * self.scale
         rows = torch.cat([scaled[:, :n], scaled[:, -1:, :6].expand(-1, n, -1), flag], dim=-1)
         rows = rows * flag
-        own = actions if own_actions is None else own_actions
-        enc = self.state_encoder(rows)  # (B, N, h)
-        sa = self.state_action_encoder(torch.cat([rows, actions * flag], dim=-1))
+        sa = self.encoder(torch.cat([rows, actions * flag], dim=-1))  # (B, N, h)
+        enc = sa if own_actions is None else self.encoder(torch.cat([rows, own_actions * flag], -1))
         d = enc.shape[-1] // self.heads
 
         def split(x: Tensor) -> Tensor:  # (B, N, h) -> (B, H, N, d)
@@ -242,7 +241,7 @@ class AttentionCritic(RowScaled):
         allowed = (alive.unsqueeze(1) & others).unsqueeze(1)  # (B, 1, N, N): key j for query i
         weights = small_softmax(logits.masked_fill(~allowed, -1e9)) * allowed
         attended = (weights @ v).transpose(1, 2).reshape(b, n, -1)
-        value = self.head(torch.cat([enc, attended, own * flag], dim=-1)).squeeze(-1)
+        value = self.head(torch.cat([enc, attended], dim=-1)).squeeze(-1)
         reg = masked_mean(logits**2, allowed.expand_as(logits))
         return value, reg
 
