@@ -1,19 +1,22 @@
-"""DDPG (Lillicrap et al., 2016) as independent learners: each pursuer has its own actor and its
-own critic, and both see only that pursuer's observation (and its critic only its own action).
+"""DDPG (Lillicrap et al., 2016) as independent learners: each pursuer acts on its own observation
+and is judged by a critic that sees only that observation and its own action.
 
 It is :class:`pes.algos.maddpg.MADDPG` with decentralised critics (a variant of that baseline,
-so a subclass): the same settings, presets, MLP actors, replay storage, update and target
-networks; critic i reads pursuer i's Table I observation (N rows of
+so a subclass): the same settings (but ``shared``'s default), presets, MLP actors, replay
+storage, update and target networks; critic i reads pursuer i's Table I observation (N rows of
 8, scaled, with their real-row flags) and its action instead of the global state and every
 action. The other pursuers are part of each learner's environment, so its Q is non-stationary
 while they learn -- the weakness MADDPG's centralised critics address.
 
-``shared=True`` gives one actor and one critic trained on every pursuer's experience (parameter
-sharing); the default is one per pursuer. Damaged pursuers: their rows are zero and flagged 0 in
-the others' observations, and their own Qs are left out of the losses.
+``shared=True`` (the default) gives one actor and one critic trained on every pursuer's
+experience (parameter sharing, as PPO's and MAAC's pursuers share theirs); ``shared=False`` one
+of each per pursuer. Damaged pursuers: their rows are zero and flagged 0 in the others'
+observations, and their own Qs are left out of the losses.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
@@ -50,10 +53,21 @@ class LocalCritics(RowScaled):
         return self.each(state, alive, actions.unsqueeze(0).expand(self.n, *actions.shape))
 
 
+@dataclass
+class DDPGConfig(MADDPGConfig):
+    """DDPG's settings: MADDPG's, with parameter sharing by default."""
+
+    shared: bool = True
+    """One actor and one critic for all pursuers, trained on every pursuer's experience; False:
+    one each. With one each, a learner gets a fifth of the experience (five pursuers) and
+    failed the positive control (docs/algorithms/ddpg.md)."""
+
+
 class DDPG(MADDPG):
     """Independent DDPG learners (``algo: ddpg``)."""
 
     name = "ddpg"
+    Config = DDPGConfig
     PRESETS = DDPG_PRESETS
 
     @staticmethod
