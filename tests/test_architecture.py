@@ -172,16 +172,18 @@ def test_the_quick_presets_of_table4_share_one_protocol_and_one_run():
 
 
 def test_the_quick_presets_hold_what_their_searches_found():
-    """A learner whose equal search (``results/tuning/<algo>``, ``pes tune``) is complete trains
-    the search's best settings in its quick preset; one whose search is not finished keeps the
-    values of the searched settings that its trial t00 began from (the settings under search
-    do not change under it). Settings the learner no longer searches (fixed by its method's
-    standard form, as MAAC's target entropy) are not compared."""
-    root = Path(__file__).resolve().parents[1] / "results" / "tuning"
+    """A learner whose equal search (``pes tune``) is complete trains the search's best settings
+    in its quick preset; one whose search is not finished keeps the values of the searched
+    settings that its trial t00 began from (the settings under search do not change under it).
+    The search over the current space (``results/tuning_current/<algo>``) stands before the
+    earlier one (``results/tuning/<algo>``). Settings the learner no longer searches (fixed by
+    its method's standard form, as MAAC's target entropy) are not compared."""
+    results = Path(__file__).resolve().parents[1] / "results"
     searched = []
     for algo in (*TABLE4_ALGOS, "cbc"):
-        report = root / algo / "tuning.json"
-        if not report.is_file():
+        reports = [results / d / algo / "tuning.json" for d in ("tuning_current", "tuning")]
+        report = next((r for r in reports if r.is_file()), None)
+        if report is None:
             continue
         summary = json.loads(report.read_text())
         first = {r["id"]: r["values"] for r in summary["results"]}.get("t00")
