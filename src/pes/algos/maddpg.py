@@ -88,10 +88,12 @@ MADDPG_PRESETS["gpu"] = gpu_preset(MADDPG_PRESETS["quick"])
 """MADDPG's presets."""
 
 DDPG_TUNED: dict[str, Any] = dict(
-    lr_actor=7.03e-4, lr_critic=7.19e-4, batch_size=128, mlp_hidden=256
+    lr_actor=1.18e-3, lr_critic=7.93e-4, batch_size=128, mlp_hidden=256, gamma=0.98
 )
-"""The best of DDPG's search (results/tuning/ddpg, trial t05: 1.0 % of the held-out episodes
-after 1,000,000 env steps)."""
+"""The best of DDPG's search over the current space with its networks shared
+(results/tuning_current/ddpg, trial t02: 22.0 % of the held-out episodes after 1,000,000 env
+steps, the earlier preset t00 18.5 %). Its first search (results/tuning/ddpg, one network per
+pursuer) had found t05 there: lr 7.03e-4 / 7.19e-4, batch 128, 256 units, gamma 0.95."""
 
 DDPG_PRESETS: dict[str, dict[str, Any]] = {
     **MADDPG_PRESETS,
