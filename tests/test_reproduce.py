@@ -15,6 +15,7 @@ from PIL import Image
 import pes
 from pes.cli import main
 from pes.errors import ConfigError
+from pes.experiments.report import episode_config
 from pes.experiments.reproduce import reproduce
 from pes.experiments.trials import BUDGETS, eval_config, make_trials, train_config
 from pes.sim.bench import machine_info
@@ -597,6 +598,9 @@ def test_a_scenario_changes_every_method_s_task_in_training_and_evaluation(tmp_p
         assert done["spec"]["scenario"] == slow
     assert eval_config(BUDGETS["tiny"], 0, slow).evader_max_speed == 8.0
     assert "`--scenario evader_max_speed=8.0`" in (tmp_path / "table4.md").read_text()
+    # and the figures' recorded episodes (Figs. 11-12) play on the same task
+    figure_task = episode_config(json.loads((tmp_path / "reproduce.json").read_text()), 1)
+    assert figure_task.evader_max_speed == 8.0 and figure_task.damaged == 1
     with pytest.raises(ConfigError, match="other settings"):
         reproduce("table4", budget="tiny", seeds=1, methods=["pid-pf"], out=tmp_path,
                   use_ray=False, progress=False)  # fmt: skip

@@ -313,6 +313,10 @@ def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarr
     return curves
 
 
+COLORS = {method: f"C{i}" for i, method in enumerate(LABELS)}
+"""One matplotlib colour per method (by its place in Table IV), the same in every figure."""
+
+
 def _band(
     ax,
     runs: list[np.ndarray],
@@ -321,14 +325,16 @@ def _band(
     scale: float = 1.0,
     x: str = "episodes",
     x_scale: float = 1.0,
+    color: str | None = None,
 ) -> None:
     """Mean ± std over ``runs`` of ``key`` × ``scale`` against the log column ``x`` ×
-    ``x_scale`` (each run interpolated onto every run's x values, within its own range)."""
+    ``x_scale`` (each run interpolated onto every run's x values, within its own range), in
+    ``color`` (matplotlib's next colour when None)."""
     grid = np.unique(np.concatenate([r[x] * x_scale for r in runs]))
     grid = grid[grid <= min(float(r[x][-1]) * x_scale for r in runs)]
     ys = np.stack([np.interp(grid, r[x] * x_scale, r[key] * scale) for r in runs])
     mean = ys.mean(0)
-    (line,) = ax.plot(grid, mean, label=f"{label} ({len(runs)} seeds)")
+    (line,) = ax.plot(grid, mean, label=f"{label} ({len(runs)} seeds)", color=color)
     if len(runs) > 1:
         std = ys.std(0, ddof=1)
         low, high = mean - std, mean + std
@@ -364,7 +370,7 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
         fig, ax = plt.subplots(figsize=(7, 4.5))
         for method in LABELS:
             if method in curves:
-                _band(ax, curves[method], key, LABELS[method], scale)
+                _band(ax, curves[method], key, LABELS[method], scale, color=COLORS[method])
         ax.set_xlabel("episodes")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
@@ -382,7 +388,7 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
             axes, (("success_rate", "success rate (%)", 100.0), ("avg_reward", "average reward", 1))
         ):
             for method in ("cbc", "cbc-tp"):
-                _band(ax, curves[method], key, LABELS[method], scale)
+                _band(ax, curves[method], key, LABELS[method], scale, color=COLORS[method])
             ax.set_xlabel("episodes")
             ax.set_ylabel(ylabel)
             ax.grid(alpha=0.3)
@@ -410,7 +416,7 @@ def _experience_and_compute(curves: dict, folder: Path, plt, training: str) -> t
         for method in LABELS:
             runs = [r for r in curves.get(method, []) if x in (r.dtype.names or ())]
             if runs:
-                _band(ax, runs, "success_rate", LABELS[method], 100.0, x, x_scale)
+                _band(ax, runs, "success_rate", LABELS[method], 100.0, x, x_scale, COLORS[method])
         ax.set_xlabel(xlabel)
         ax.set_ylabel("success rate (%)")
         ax.grid(alpha=0.3)
@@ -436,13 +442,19 @@ def _seed0(specs: list[dict], done: dict, algo: str) -> Path | None:
     return None
 
 
+def episode_config(meta: dict, damaged: int = 0):
+    """The evaluation scenario of a reproduction's figures: its budget's evaluation with
+    ``damaged`` pursuers disabled, on its task (``meta["scenario"]``, e.g. the positive
+    control's evader at 8 m/s)."""
+    return eval_config(BUDGETS[meta["budget"]], damaged, meta.get("scenario"))
+
+
 def _trajectory_figures(out, specs, done, meta, folder, plt) -> list[tuple[str, str]]:
-    budget = BUDGETS[meta["budget"]]
     seed = EVAL_SEED
     made = []
 
     def episode(algo: str, damaged: int):
-        cfg = eval_config(budget, damaged)
+        cfg = episode_config(meta, damaged)
         policy = load_pursuer_policy(out / _seed0(specs, done, algo), cfg)[0]
         return record_episode(policy, cfg, seed=seed)
 
