@@ -31,6 +31,7 @@ from pes.experiments.budgets import (
 from pes.experiments.paper import LABELS, TABLE4, TABLE5, TABLE6
 from pes.record import plot_trajectories, record_episode
 from pes.sim.bench import machine_info
+from pes.sim.config import EnvConfig
 
 
 def _load(out: Path, specs: list[dict]) -> dict[str, dict]:
@@ -442,7 +443,7 @@ def _seed0(specs: list[dict], done: dict, algo: str) -> Path | None:
     return None
 
 
-def episode_config(meta: dict, damaged: int = 0):
+def episode_config(meta: dict, damaged: int = 0) -> EnvConfig:
     """The evaluation scenario of a reproduction's figures: its budget's evaluation with
     ``damaged`` pursuers disabled, on its task (``meta["scenario"]``, e.g. the positive
     control's evader at 8 m/s)."""
