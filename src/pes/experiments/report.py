@@ -335,7 +335,8 @@ def _band(
     grid = grid[grid <= min(float(r[x][-1]) * x_scale for r in runs)]
     ys = np.stack([np.interp(grid, r[x] * x_scale, r[key] * scale) for r in runs])
     mean = ys.mean(0)
-    (line,) = ax.plot(grid, mean, label=f"{label} ({len(runs)} seeds)", color=color)
+    seeds = f"{len(runs)} seed" + ("s" if len(runs) > 1 else "")
+    (line,) = ax.plot(grid, mean, label=f"{label} ({seeds})", color=color)
     if len(runs) > 1:
         std = ys.std(0, ddof=1)
         low, high = mean - std, mean + std
