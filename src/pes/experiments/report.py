@@ -360,8 +360,8 @@ def figures(out: Path, specs: list[dict], done: dict, meta: dict) -> list[tuple[
         "training episodes (as each method trained: its exploration, its protocol's training "
         "reward, disturbance and crash rule of the moment), mean ± std over seeds "
         "(success-rate bands cut at 0 %), one point per log row; under the `pes` protocol the "
-        "first rows are PID(PF)'s demonstration episodes (the log's `demonstrating` column), "
-        "the first of which to end are mostly captures"
+        "first rows are PID(PF)'s demonstration episodes (the log's `demonstrating` column; "
+        "across many environments the first of them to end are the short ones, mostly captures)"
     )
     panels = (
         ("fig6_success_rate.png", "success_rate", "success rate (%)", 100.0, "Fig. 6"),
