@@ -278,6 +278,40 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
     assert summary["complete"] and summary["best"] == specs[1]["values"]
 
 
+def test_tune_recommends_a_trial_within_one_standard_error_at_half_the_cost(tmp_path):
+    """The best settings are the top trial's unless another trial at the furthest budget scores
+    within one standard error of its success rate in at most half its CPU time; then the
+    cheapest such trial's. Outside the error, or at more than half the cost, the top stays."""
+    from pes.experiments.tune import chosen, make_tune_trials, write_json, write_tuning_report
+
+    def result(id_, success, cpu_s, env_steps=800):
+        return {"id": id_, "success_rate": success, "cpu_s": cpu_s, "env_steps": env_steps}
+
+    # 200 episodes at 47 %: one standard error is 3.53 points
+    top = result("t05", 0.47, 10_000.0)
+    assert chosen([top, result("t03", 0.46, 1_300.0)], 200)["id"] == "t03"
+    assert chosen([top, result("t03", 0.43, 1_300.0)], 200)["id"] == "t05"  # outside the error
+    assert chosen([top, result("t03", 0.46, 5_001.0)], 200)["id"] == "t05"  # over half the cost
+    assert chosen([top, result("t03", 0.47, 900.0, env_steps=400)], 200)["id"] == "t05"
+    cheaper = [top, result("t01", 0.45, 4_000.0), result("t03", 0.44, 2_000.0)]
+    assert chosen(cheaper, 200)["id"] == "t03"  # the cheapest of those within the error
+
+    specs = make_tune_trials("ppo", 2, 800, 0, 200, "pes", 0, "tiny")
+    for spec, (success, cpu_s) in zip(specs, ((0.46, 100.0), (0.47, 800.0)), strict=True):
+        folder = tmp_path / "trials" / spec["id"]
+        folder.mkdir(parents=True)
+        train = {"episodes": 8, "env_steps": 800, "updates": 1, "cpu_s": cpu_s}
+        ev = {"success_rate": success, "mean_steps": 400.0, "mean_reward": -0.2}
+        ev |= {"mean_crashes": 1.0, "lost_rate": 0.1, "timeout_rate": 0.4}
+        record = {"spec": spec, "env_steps": 800, "train": train, "eval": ev}
+        write_json(folder / "result-800.json", record)
+    summary = write_tuning_report(tmp_path, specs, "", 0.0)
+    assert [r["id"] for r in summary["results"]] == ["t01", "t00"]
+    assert summary["best_id"] == "t00" and summary["best"] == specs[0]["values"]
+    line = "Best: t00 (46.0 %), within one standard error (3.5 points over 200 episodes) of t01's "
+    assert line + "47.0 % in 0.12 of its CPU time." in (tmp_path / "README.md").read_text()
+
+
 def test_tune_runs_the_trials_that_resume_first(tmp_path):
     """A round starts the trials that resume from a checkpoint before those that train from
     the start (whose checkpoint is gone, or never was), each group in its order."""

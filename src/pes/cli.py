@@ -528,7 +528,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(summary)
     else:
-        lead = summary["results"][0] if summary["results"] else None
+        ranked = {r["id"]: r for r in summary["results"]}
+        lead = ranked.get(summary["best_id"]) or next(iter(ranked.values()), None)
         print(
             f"{summary['scored']} of {summary['trials']} trials scored; "
             + ("best: " if summary["complete"] else "leading so far: ")

@@ -271,6 +271,28 @@ def score(result: dict[str, Any]) -> float:
     return result["success_rate"] + 1e-5 * result["mean_reward"]
 
 
+def chosen(results: list[dict], eval_episodes: int) -> dict[str, Any]:
+    """The trial whose settings a search recommends, of ``results`` ranked best first (each with
+    ``env_steps``, ``success_rate`` and its training's ``cpu_s``): the best-scored trial at the
+    furthest budget, unless a trial there lies within one standard error of its success rate
+    (sqrt(p (1 - p) / n) over the ``eval_episodes`` held-out episodes) and trained in at most half
+    its CPU time; then the cheapest such trial. This is the one-standard-error rule of model
+    selection (Hastie, Tibshirani and Friedman, The Elements of Statistical Learning, 7.10) with
+    training cost as the measure of simplicity: scores that the held-out episodes cannot tell
+    apart do not buy a preset that costs twice the compute."""
+    top = results[0]
+    p = top["success_rate"]
+    floor = p - math.sqrt(p * (1 - p) / eval_episodes)
+    tied = [
+        r
+        for r in results
+        if r["env_steps"] == top["env_steps"]
+        and r["success_rate"] >= floor
+        and r["cpu_s"] <= top["cpu_s"] / 2
+    ]
+    return min(tied, key=lambda r: (r["cpu_s"], r["id"])) if tied else top
+
+
 def survivors(records: list[dict], keep: int) -> list[str]:
     """The ids of the ``keep`` best-scored records (ties: the lower id)."""
     ranked = sorted(records, key=lambda r: (-score(r["eval"]), r["spec"]["id"]))
@@ -427,6 +449,7 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
     beyond = other_budgets(out, specs, budgets)
     finals = math.ceil(len(specs) / 2 ** (len(budgets) - 1))
     complete = pending(found) is None
+    pick = chosen(results, first["eval_episodes"]) if results else None
     summary = {
         "algo": first["algo"],
         "protocol": first["protocol"],
@@ -440,7 +463,8 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "search_space": {k: list(v) for k, v in learner_class(first["algo"]).TUNE_SPACE.items()},
         "command": command,
         "seconds_this_run": round(seconds, 1),
-        "best": results[0]["values"] if complete else None,
+        "best": pick["values"] if complete else None,
+        "best_id": pick["id"] if complete else None,
         "results": results,
         "other_budgets": beyond,
     }
@@ -462,7 +486,13 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         + f". Each score is on the same {first['eval_episodes']} held-out episodes (disturbance "
         "on, crashes disable, the default evader): success rate, then mean reward. Trial t00 is "
         f"the {first['preset']} preset as it was when the search began. Trials are ranked by the "
-        "furthest budget they reached, then by their score there.",
+        "furthest budget they reached, then by their score there. The best settings are the "
+        "top trial's, unless a trial at the same budget scores within one standard error of its "
+        "success rate in at most half its CPU time: then the cheapest such trial's (the "
+        "one-standard-error rule of model selection, with training cost as simplicity)."
+        + (
+            f" Best: {describe_pick(pick, results[0], first['eval_episodes'])}." if complete else ""
+        ),
         "",
         f"Command: `{command}`" if command else "",
         "",
@@ -520,6 +550,19 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         ]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     return {**summary, "out": str(out)}
+
+
+def describe_pick(pick: dict, top: dict, eval_episodes: int) -> str:
+    """One line on the trial :func:`chosen` picked, against the top-ranked trial ``top``."""
+    if pick is top:
+        return f"{pick['id']}, the top trial"
+    p = top["success_rate"]
+    error = 100 * math.sqrt(p * (1 - p) / eval_episodes)
+    return (
+        f"{pick['id']} ({100 * pick['success_rate']:.1f} %), within one standard error "
+        f"({error:.1f} points over {eval_episodes} episodes) of {top['id']}'s "
+        f"{100 * p:.1f} % in {pick['cpu_s'] / top['cpu_s']:.2f} of its CPU time"
+    )
 
 
 def other_budgets(out: Path, specs: list[dict], budgets: list[int]) -> list[dict]:
