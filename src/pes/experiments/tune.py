@@ -288,7 +288,7 @@ def chosen(results: list[dict], eval_episodes: int) -> dict[str, Any]:
         for r in results
         if r["env_steps"] == top["env_steps"]
         and r["success_rate"] >= floor
-        and r["cpu_s"] <= top["cpu_s"] / 2
+        and 0 < r["cpu_s"] <= top["cpu_s"] / 2
     ]
     return min(tied, key=lambda r: (r["cpu_s"], r["id"])) if tied else top
 
