@@ -279,9 +279,10 @@ def test_tune_breaks_ties_by_reward_not_by_the_soonest_failure(tmp_path):
 
 
 def test_tune_recommends_a_trial_within_one_standard_error_at_half_the_cost(tmp_path):
-    """The best settings are the top trial's unless another trial at the furthest budget scores
-    within one standard error of its success rate in at most half its CPU time; then the
-    cheapest such trial's. Outside the error, or at more than half the cost, the top stays."""
+    """The best settings are the top trial's unless it captures and another trial at the furthest
+    budget scores within one standard error of its success rate in at most half its CPU time;
+    then the cheapest such trial's. Outside the error, at more than half the cost, or where no
+    trial captures, the top stays."""
     from pes.experiments.tune import chosen, make_tune_trials, write_json, write_tuning_report
 
     def result(id_, success, cpu_s, env_steps=800):
@@ -295,6 +296,8 @@ def test_tune_recommends_a_trial_within_one_standard_error_at_half_the_cost(tmp_
     assert chosen([top, result("t03", 0.47, 900.0, env_steps=400)], 200)["id"] == "t05"
     cheaper = [top, result("t01", 0.45, 4_000.0), result("t03", 0.44, 2_000.0)]
     assert chosen(cheaper, 200)["id"] == "t03"  # the cheapest of those within the error
+    nothing = [result("t05", 0.0, 10_000.0), result("t03", 0.0, 1_000.0)]
+    assert chosen(nothing, 200)["id"] == "t05"  # no captures: the mean reward ranked them
 
     specs = make_tune_trials("ppo", 2, 800, 0, 200, "pes", 0, "tiny")
     for spec, (success, cpu_s) in zip(specs, ((0.46, 100.0), (0.47, 800.0)), strict=True):

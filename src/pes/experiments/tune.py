@@ -274,14 +274,17 @@ def score(result: dict[str, Any]) -> float:
 def chosen(results: list[dict], eval_episodes: int) -> dict[str, Any]:
     """The trial whose settings a search recommends, of ``results`` ranked best first (each with
     ``env_steps``, ``success_rate`` and its training's ``cpu_s``): the best-scored trial at the
-    furthest budget, unless a trial there lies within one standard error of its success rate
-    (sqrt(p (1 - p) / n) over the ``eval_episodes`` held-out episodes) and trained in at most half
-    its CPU time; then the cheapest such trial. This is the one-standard-error rule of model
+    furthest budget, unless it captures and a trial there lies within one standard error of its
+    success rate (sqrt(p (1 - p) / n) over the ``eval_episodes`` held-out episodes) and trained in
+    at most half its CPU time; then the cheapest such trial (where the top trial captures nothing,
+    the mean reward ranks, as in :func:`score`). This is the one-standard-error rule of model
     selection (Hastie, Tibshirani and Friedman, The Elements of Statistical Learning, 7.10) with
     training cost as the measure of simplicity: scores that the held-out episodes cannot tell
     apart do not buy a preset that costs twice the compute."""
     top = results[0]
     p = top["success_rate"]
+    if p == 0:
+        return top
     floor = p - math.sqrt(p * (1 - p) / eval_episodes)
     tied = [
         r
@@ -487,8 +490,9 @@ def write_tuning_report(out: Path, specs: list[dict], command: str, seconds: flo
         "on, crashes disable, the default evader): success rate, then mean reward. Trial t00 is "
         f"the {first['preset']} preset as it was when the search began. Trials are ranked by the "
         "furthest budget they reached, then by their score there. The best settings are the "
-        "top trial's, unless a trial at the same budget scores within one standard error of its "
-        "success rate in at most half its CPU time: then the cheapest such trial's (the "
+        "top trial's, unless it captures and a trial at the same budget scores within one "
+        "standard error of its success rate in at most half its CPU time: then the cheapest "
+        "such trial's (the "
         "one-standard-error rule of model selection, with training cost as simplicity)."
         + (
             f" Best: {describe_pick(pick, results[0], first['eval_episodes'])}." if complete else ""
