@@ -60,6 +60,12 @@ class EvalResult:
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
 
 
+def success_error(rate: float, episodes: int) -> float:
+    """The standard error of a success rate ``rate`` (a fraction) measured over ``episodes``
+    independent episodes: sqrt(rate (1 - rate) / episodes), as a fraction."""
+    return math.sqrt(rate * (1 - rate) / episodes)
+
+
 def _outcome(info: dict, terminated: torch.Tensor, i: int) -> str:
     """How the finished episode of environment ``i`` ended: ``capture``, ``lost`` (too few
     pursuers alive) or ``timeout`` (the step limit)."""
@@ -180,7 +186,7 @@ def evaluate(
         mean_crashes=float(np.mean(per_episode["crashes"])),
         lost_rate=outcomes.count("lost") / len(outcomes),
         timeout_rate=outcomes.count("timeout") / len(outcomes),
-        success_rate_ci95=float(1.96 * math.sqrt(rate * (1 - rate) / len(success))),
+        success_rate_ci95=float(1.96 * success_error(rate, len(success))),
         seed=seed,
         per_episode=per_episode,
     )

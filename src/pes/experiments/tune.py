@@ -45,7 +45,7 @@ from typing import Any
 from pes.algos import ALGOS, PURSUER_ALGOS, build_train_config, learner_class, train
 from pes.algos.loading import load_pursuer_policy
 from pes.errors import ConfigError
-from pes.evaluate import evaluate
+from pes.evaluate import evaluate, success_error
 from pes.experiments.budgets import BUDGETS, EVAL_ENVS, eval_config, write_json
 from pes.experiments.report import read_progress, trained_on
 from pes.experiments.sweep import (
@@ -285,7 +285,7 @@ def chosen(results: list[dict], eval_episodes: int) -> dict[str, Any]:
     p = top["success_rate"]
     if p == 0:
         return top
-    floor = p - math.sqrt(p * (1 - p) / eval_episodes)
+    floor = p - success_error(p, eval_episodes)
     tied = [
         r
         for r in results
@@ -561,7 +561,7 @@ def describe_pick(pick: dict, top: dict, eval_episodes: int) -> str:
     if pick is top:
         return f"{pick['id']}, the top trial"
     p = top["success_rate"]
-    error = 100 * math.sqrt(p * (1 - p) / eval_episodes)
+    error = 100 * success_error(p, eval_episodes)
     return (
         f"{pick['id']} ({100 * pick['success_rate']:.1f} %), within one standard error "
         f"({error:.1f} points over {eval_episodes} episodes) of {top['id']}'s "
