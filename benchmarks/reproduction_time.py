@@ -34,7 +34,7 @@ SOURCES = {
     "mappo": "results/quick_current",
     "ddpg": "results/quick_current",
     "maddpg": "results/quick",
-    "bicnet": "results/quick",
+    "bicnet": "results/quick_current",
     "maac": "results/quick_current",
     "cbc": "results/quick",
     "cbc-tp": "results/quick_current",
