@@ -315,19 +315,25 @@ def test_tune_recommends_a_trial_within_one_standard_error_at_half_the_cost(tmp_
     assert line + "47.0 % in 0.12 of its CPU time." in (tmp_path / "README.md").read_text()
 
 
-def test_tune_runs_the_trials_that_resume_first(tmp_path):
+def test_tune_runs_the_trials_that_resume_first_then_the_cheapest(tmp_path):
     """A round starts the trials that resume from a checkpoint before those that train from
-    the start (whose checkpoint is gone, or never was), each group in its order."""
-    from pes.experiments.tune import make_tune_trials, resumable_first
+    the start (whose checkpoint is gone, or never was), each group by the CPU time of its last
+    scored round, cheapest first (unscored trials in their order)."""
+    from pes.experiments.tune import make_tune_trials, run_order, write_json
 
-    specs = make_tune_trials("ppo", 4, 800, 0, 2, "pes", 0, "tiny")
+    specs = make_tune_trials("ppo", 5, 800, 0, 2, "pes", 0, "tiny")
     for trial in ("t01", "t03"):
         run = tmp_path / "trials" / trial / "run"
         run.mkdir(parents=True)
         (run / "checkpoint.pt").write_bytes(b"")
     (tmp_path / "trials" / "t02" / "run").mkdir(parents=True)  # a run without a checkpoint
-    order = [s["id"] for s in resumable_first(tmp_path, specs)]
-    assert order == ["t01", "t03", "t00", "t02"]
+    for trial, cpu_s in (("t03", 10.0), ("t01", 50.0), ("t04", 20.0), ("t00", 30.0)):
+        for env_steps, scale in ((400, 1.0), (800, 3.0)):  # the last round counts
+            record = {"env_steps": env_steps, "train": {"cpu_s": scale * cpu_s}}
+            (tmp_path / "trials" / trial).mkdir(parents=True, exist_ok=True)
+            write_json(tmp_path / "trials" / trial / f"result-{env_steps}.json", record)
+    order = [s["id"] for s in run_order(tmp_path, specs)]
+    assert order == ["t03", "t01", "t02", "t04", "t00"]
 
 
 def test_tune_report_draws_every_trial_learning_curve(tmp_path):

@@ -326,13 +326,26 @@ def pending(found: list[tuple[int, list[dict], dict[str, dict]]]) -> tuple[int, 
     return (budget, todo) if todo else None
 
 
-def resumable_first(out: Path, todo: list[dict]) -> list[dict]:
-    """``todo`` with the trials that resume from a checkpoint (``trials/<id>/run/
-    checkpoint.pt``) first, each group in its order: a round's shortest work runs first, so
-    that an interruption loses the least (a trial whose checkpoint is gone trains again from
-    the start, under the same schedules: they count episodes, not the budget)."""
+def run_order(out: Path, todo: list[dict]) -> list[dict]:
+    """``todo`` in the order its trials run: those that resume from a checkpoint
+    (``trials/<id>/run/checkpoint.pt``) first, then the rest, each group by the CPU time the
+    trial took in the last round it was scored in (a first round keeps the trials' order): a
+    round's shortest work runs first, so that an interruption loses the least and the scores
+    that cost least arrive first (a trial whose checkpoint is gone trains again from the start,
+    under the same schedules: they count episodes, not the budget)."""
 
-    return sorted(todo, key=lambda spec: not (run_folder(out, spec) / "checkpoint.pt").is_file())
+    def last_cpu_s(spec: dict) -> float:
+        scored = (Path(out) / "trials" / spec["id"]).glob("result-*.json")
+        records = [json.loads(path.read_text()) for path in scored]
+        return max(records, key=lambda r: r["env_steps"])["train"]["cpu_s"] if records else 0.0
+
+    return sorted(
+        todo,
+        key=lambda spec: (
+            not (run_folder(out, spec) / "checkpoint.pt").is_file(),
+            last_cpu_s(spec),
+        ),
+    )
 
 
 def tune(
@@ -371,7 +384,7 @@ def tune(
     use_ray = choose_runner(use_ray, ray_address)
     start = time.time()
     while not report_only and (round_ := pending(rounds(out, specs))) is not None:
-        budget, todo = round_[0], resumable_first(out, round_[1])
+        budget, todo = round_[0], run_order(out, round_[1])
         folders = [out / "trials" / s["id"] for s in todo]
         check_free(folders + [run_folder(out, s) for s in todo], "pes tune")
         view = SweepProgress(len(todo), 0, progress, f"tune {budget:,} env steps")

@@ -100,8 +100,8 @@ class TrainConfig:
     """Method (see ``pes train --help``)."""
     preset: str = "quick"
     """Budget preset applied under the user's settings: ``paper`` (the paper's settings),
-    ``quick`` (2,000,000 env steps: 10 to 90 minutes of one CPU thread, by method), ``gpu`` (the quick
-    settings at a GPU's sizes, 20,000,000 env steps) or ``tiny`` (tests)."""
+    ``quick`` (2,000,000 env steps: 10 to 90 minutes of one CPU thread, by method), ``gpu``
+    (the quick settings at a GPU's sizes, 20,000,000 env steps) or ``tiny`` (tests)."""
     protocol: Protocol = field(default_factory=Protocol)
     """The training protocol (:mod:`pes.learn.protocol`): ``paper`` or ``pes`` and its aids."""
     learner: Any = None

@@ -1,8 +1,8 @@
 """The parts of the budget presets that every method shares, so that a comparison's methods
 run on the same budget: the ``quick`` run (2,000,000 env steps from 32 environments against the
-shipped DDPG evader: 10 to 90 minutes of one CPU thread, by method), the ``gpu`` run (each method's quick
-settings at the sizes of a GPU, :func:`gpu_preset`) and the ``tiny`` run of the tests (with the
-protocol's aids scaled down to its 40 episodes)."""
+shipped DDPG evader: 10 to 90 minutes of one CPU thread, by method), the ``gpu`` run (each
+method's quick settings at the sizes of a GPU, :func:`gpu_preset`) and the ``tiny`` run of the
+tests (with the protocol's aids scaled down to its 40 episodes)."""
 
 from __future__ import annotations
 
