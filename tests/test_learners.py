@@ -164,6 +164,21 @@ def _tiny(out, protocol_name="paper", **values):
     return train(cfg, out, progress=False)
 
 
+def test_a_run_names_its_cpu_by_model_family_and_vector_instructions():
+    """Two CPUs that a virtual machine names alike ("AMD EPYC") are told apart by their
+    family and model numbers and their widest vector instructions."""
+    from pes.sim.bench import cpu_model
+
+    def info(model: str, flags: str) -> str:
+        first = f"processor\t: 0\nmodel name\t: AMD EPYC\ncpu family\t: 25\nmodel\t\t: {model}\n"
+        return first + f"flags\t\t: fpu sse2 {flags}\n\nprocessor\t: 1\nmodel\t\t: 99\n"
+
+    assert cpu_model(info("1", "avx avx2")) == "AMD EPYC (family 25, model 1, AVX2)"
+    assert cpu_model(info("17", "avx avx2 avx512f")) == "AMD EPYC (family 25, model 17, AVX-512)"
+    assert cpu_model("model name\t: Apple M2\n") == "Apple M2"
+    assert cpu_model("processor\t: 0\nBogoMIPS\t: 50.00\n") is None
+
+
 def test_train_writes_a_run_and_the_policy_evaluates(tmp_path, capsys):
     summary = _tiny(tmp_path / "run", episodes=16, eval_episodes=4)
     for name in ("config.yaml", "progress.csv", "checkpoint.pt", "policy.pt", "summary.json"):
