@@ -28,9 +28,9 @@ def cpu_model(cpuinfo: str) -> str | None:
     """The CPU that ``cpuinfo`` (the text of ``/proc/cpuinfo``) describes, as its model name
     and, where the file gives them, its family and model numbers and its widest vector
     instructions, e.g. ``AMD EPYC (family 25, model 1, AVX2)``: virtual machines often report
-    only a vendor's line ("AMD EPYC"), which names CPUs of different speeds alike (an LSTM
-    update runs about 1.5x slower on AVX2 than on AVX-512 there). None if the file names no
-    model."""
+    only a vendor's line ("AMD EPYC"), which names CPUs of different speeds alike (the same
+    training has taken 1.5 to 1.7 times the CPU time on one "AMD EPYC" as on another). None if
+    the file names no model."""
     fields: dict[str, str] = {}
     for line in cpuinfo.splitlines():
         key, sep, value = line.partition(":")
