@@ -132,3 +132,20 @@ def test_crash_sites_records_every_crash_of_the_measured_episodes(tmp_path, caps
     assert 0.0 <= summary["share_evader_hidden"] <= 1.0
     assert sum(map(sum, summary["map_10m_north_up"])) == summary["crashes"]
     assert json.loads(capsys.readouterr().out) == summary
+
+
+def test_host_speed_replays_a_run_row_for_row_and_compares_its_cpu_time(tmp_path):
+    """benchmarks/host_speed.py trains a run again from its config.yaml: the same training, row
+    for row, so that the ratio of the CPU times measures the machine alone."""
+    spec = importlib.util.spec_from_file_location("host_speed", ROOT / "benchmarks/host_speed.py")
+    host_speed = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(host_speed)
+    _tiny_run(tmp_path / "run", threads=1, log_every=4)
+    then = host_speed.log_rows(tmp_path / "run" / "progress.csv")
+    here = host_speed.replay(tmp_path / "run", int(then[-1]["env_steps"]), tmp_path / "again")
+    result = host_speed.compare(then, here)
+    assert result["replayed"], (then, here)
+    assert result["env_steps"] == [int(then[0]["env_steps"]), int(then[-1]["env_steps"])]
+    assert result["cpu_s_then"] > 0 and result["cpu_s_here"] > 0 and result["cpu_ratio"] > 0
+    other = [dict(row, success_rate=row["success_rate"] + 0.5) for row in here]
+    assert not host_speed.compare(then, other)["replayed"]  # another training is told apart

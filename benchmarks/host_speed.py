@@ -1,0 +1,112 @@
+"""Does this machine spend the CPU time a committed run spent? A check before a run budgeted in
+CPU minutes (`cpu_limit`, e.g. Table IV at equal compute) joins runs made elsewhere.
+
+    python benchmarks/host_speed.py          # benchmarks/results/host_speed.json
+
+It trains a committed run again from its `config.yaml` (the same seed and settings) for its
+first ``--env-steps`` env steps on one torch thread, in a temporary folder, and compares the CPU
+time that took with the run's own `progress.csv` over the same log rows (from the first row on,
+so that compiling the simulator's step is left out). The replay is the same training as the
+run's (its rows' update counts and training success are compared too, ``replayed``), so the
+ratio ``cpu_ratio`` (here / then) measures the machine alone: near 1 on the CPU the run trained
+on; virtual machines may name CPUs that differ by 1.5x alike ("AMD EPYC"). Run it with nothing
+else on the machine, or with as many other jobs as the compared run had beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from pes.sim.bench import machine_info
+
+DEFAULT_RUN = "results/quick_current/trials/bicnet-s0/run"
+
+
+def log_rows(progress: Path) -> list[dict[str, float]]:
+    """The rows of a run's ``progress.csv`` as numbers: env_steps, updates, cpu_s, success_rate."""
+    with open(progress) as f:
+        keys = ("env_steps", "updates", "cpu_s", "success_rate")
+        return [{k: float(row[k]) for k in keys} for row in csv.DictReader(f)]
+
+
+def replay(run: Path, env_steps: int, folder: Path) -> list[dict[str, float]]:
+    """Train ``run``'s config.yaml again for ``env_steps`` env steps into ``folder`` on one torch
+    thread; its log rows."""
+    algo = next(
+        line.split(":", 1)[1].strip()
+        for line in (run / "config.yaml").read_text().splitlines()
+        if line.startswith("algo:")
+    )
+    command = [sys.executable, "-m", "pes.cli", "train", "--algo", algo, "--config"]
+    command += [str(run / "config.yaml"), "--out", str(folder), "--json"]
+    for key, value in (
+        ("env_steps", env_steps),
+        ("threads", 1),
+        ("eval_episodes", 0),
+        ("tensorboard", "false"),
+        ("checkpoint_every", 1e6),
+    ):
+        command += ["--set", f"{key}={value}"]
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    subprocess.run(command, check=True, env=env, stdout=subprocess.DEVNULL)
+    return log_rows(folder / "progress.csv")
+
+
+def compare(then: list[dict[str, float]], here: list[dict[str, float]]) -> dict:
+    """The CPU time of the rows both logs have, from their first to their last, and whether
+    the replay is the run's training (the same updates and success at every such row)."""
+    by_steps = {row["env_steps"]: row for row in then}
+    shared = [(by_steps[row["env_steps"]], row) for row in here if row["env_steps"] in by_steps]
+    if len(shared) < 2:
+        raise SystemExit("host_speed: the replay and the run share fewer than two log rows")
+    (first_then, first_here), (last_then, last_here) = shared[0], shared[-1]
+    cpu_then = last_then["cpu_s"] - first_then["cpu_s"]
+    cpu_here = last_here["cpu_s"] - first_here["cpu_s"]
+    same = all(
+        a["updates"] == b["updates"] and abs(a["success_rate"] - b["success_rate"]) < 1e-9
+        for a, b in shared
+    )
+    return {
+        "env_steps": [int(first_here["env_steps"]), int(last_here["env_steps"])],
+        "cpu_s_then": round(cpu_then, 1),
+        "cpu_s_here": round(cpu_here, 1),
+        "cpu_ratio": round(cpu_here / cpu_then, 3),
+        "replayed": same,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--run", default=DEFAULT_RUN, help=f"a committed run (default {DEFAULT_RUN})"
+    )
+    parser.add_argument(
+        "--env-steps", type=int, default=100_000, help="env steps to replay (default 100,000)"
+    )
+    parser.add_argument("--out", default="benchmarks/results/host_speed.json")
+    args = parser.parse_args()
+    run = Path(args.run)
+    if not (run / "config.yaml").is_file() or not (run / "progress.csv").is_file():
+        raise SystemExit(f"host_speed: {run} holds no config.yaml and progress.csv")
+    with tempfile.TemporaryDirectory() as tmp:
+        here = replay(run, args.env_steps, Path(tmp) / "run")
+    result = {
+        "machine": machine_info(),
+        "run": str(run),
+        **compare(log_rows(run / "progress.csv"), here),
+        "command": "python benchmarks/host_speed.py " + " ".join(sys.argv[1:]),
+    }
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
