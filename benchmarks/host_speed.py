@@ -16,7 +16,6 @@ else on the machine, or with as many other jobs as the compared run had beside i
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
 import subprocess
@@ -24,6 +23,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from pes.experiments.report import read_progress
 from pes.sim.bench import machine_info
 
 DEFAULT_RUN = "results/quick_current/trials/bicnet-s0/run"
@@ -31,9 +31,8 @@ DEFAULT_RUN = "results/quick_current/trials/bicnet-s0/run"
 
 def log_rows(progress: Path) -> list[dict[str, float]]:
     """The rows of a run's ``progress.csv`` as numbers: env_steps, updates, cpu_s, success_rate."""
-    with open(progress) as f:
-        keys = ("env_steps", "updates", "cpu_s", "success_rate")
-        return [{k: float(row[k]) for k in keys} for row in csv.DictReader(f)]
+    keys = ("env_steps", "updates", "cpu_s", "success_rate")
+    return [{k: float(row[k]) for k in keys} for row in read_progress(progress)]
 
 
 def replay(run: Path, env_steps: int, folder: Path) -> list[dict[str, float]]:
