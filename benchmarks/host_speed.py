@@ -5,12 +5,16 @@ CPU minutes (`cpu_limit`, e.g. Table IV at equal compute) joins runs made elsewh
 
 It trains a committed run again from its `config.yaml` (the same seed and settings) for its
 first ``--env-steps`` env steps on one torch thread, in a temporary folder, and compares the CPU
-time that took with the run's own `progress.csv` over the same log rows (from the first row on,
-so that compiling the simulator's step is left out). The replay is the same training as the
-run's (its rows' update counts and training success are compared too, ``replayed``), so the
-ratio ``cpu_ratio`` (here / then) measures the machine alone: near 1 on the CPU the run trained
-on; virtual machines may name CPUs that differ by 1.5x alike ("AMD EPYC"). Run it with nothing
-else on the machine, or with as many other jobs as the compared run had beside it.
+time that took with the run's own `progress.csv` over the same log rows: those after the
+demonstrator has stopped playing (its `demonstrating` column 0), where the learner's own
+updates set the cost, from the first such row on (so that compiling the simulator's step is
+left out too). The replay does the run's work (the same update counts at every row,
+``same_work``), so the ratio ``cpu_ratio`` (here / then) measures the machine alone: near 1 on
+the CPU the run trained on; virtual machines may name CPUs that differ by 1.5x alike ("AMD
+EPYC"). ``replayed`` says whether it is also the same training to the bit (the same training
+success at every row as well); CPUs with other vector instructions may round differently and
+part from it without changing the work. Run it with nothing else on the machine, or with as
+many other jobs as the compared run had beside it.
 """
 
 from __future__ import annotations
@@ -30,9 +34,12 @@ DEFAULT_RUN = "results/quick_current/trials/bicnet-s0/run"
 
 
 def log_rows(progress: Path) -> list[dict[str, float]]:
-    """The rows of a run's ``progress.csv`` as numbers: env_steps, updates, cpu_s, success_rate."""
-    keys = ("env_steps", "updates", "cpu_s", "success_rate")
-    return [{k: float(row[k]) for k in keys} for row in read_progress(progress)]
+    """The rows of a run's ``progress.csv`` as numbers: env_steps, updates, cpu_s, success_rate
+    and demonstrating (0 in logs older than that column)."""
+    rows = read_progress(progress)
+    keys = ["env_steps", "updates", "cpu_s", "success_rate"]
+    keys += ["demonstrating"] if "demonstrating" in rows.dtype.names else []
+    return [{"demonstrating": 0.0} | {k: float(row[k]) for k in keys} for row in rows]
 
 
 def replay(run: Path, env_steps: int, folder: Path) -> list[dict[str, float]]:
@@ -59,25 +66,28 @@ def replay(run: Path, env_steps: int, folder: Path) -> list[dict[str, float]]:
 
 
 def compare(then: list[dict[str, float]], here: list[dict[str, float]]) -> dict:
-    """The CPU time of the rows both logs have, from their first to their last, and whether
-    the replay is the run's training (the same updates and success at every such row)."""
-    by_steps = {row["env_steps"]: row for row in then}
+    """The CPU time of the rows both logs have after the demonstrations, from their first to
+    their last; whether the replay did the run's work (the same updates at every such row) and
+    whether it is the run's training (the same training success as well)."""
+    by_steps = {row["env_steps"]: row for row in then if not row["demonstrating"]}
     shared = [(by_steps[row["env_steps"]], row) for row in here if row["env_steps"] in by_steps]
     if len(shared) < 2:
-        raise SystemExit("host_speed: the replay and the run share fewer than two log rows")
+        raise SystemExit(
+            "host_speed: the replay and the run share fewer than two log rows after the "
+            "demonstrations; replay more env steps (--env-steps)"
+        )
     (first_then, first_here), (last_then, last_here) = shared[0], shared[-1]
     cpu_then = last_then["cpu_s"] - first_then["cpu_s"]
     cpu_here = last_here["cpu_s"] - first_here["cpu_s"]
-    same = all(
-        a["updates"] == b["updates"] and abs(a["success_rate"] - b["success_rate"]) < 1e-9
-        for a, b in shared
-    )
+    same_work = all(a["updates"] == b["updates"] for a, b in shared)
+    same_success = all(abs(a["success_rate"] - b["success_rate"]) < 1e-9 for a, b in shared)
     return {
         "env_steps": [int(first_here["env_steps"]), int(last_here["env_steps"])],
         "cpu_s_then": round(cpu_then, 1),
         "cpu_s_here": round(cpu_here, 1),
         "cpu_ratio": round(cpu_here / cpu_then, 3),
-        "replayed": same,
+        "same_work": same_work,
+        "replayed": same_work and same_success,
     }
 
 
@@ -87,7 +97,7 @@ def main() -> None:
         "--run", default=DEFAULT_RUN, help=f"a committed run (default {DEFAULT_RUN})"
     )
     parser.add_argument(
-        "--env-steps", type=int, default=100_000, help="env steps to replay (default 100,000)"
+        "--env-steps", type=int, default=300_000, help="env steps to replay (default 300,000)"
     )
     parser.add_argument("--out", default="benchmarks/results/host_speed.json")
     args = parser.parse_args()

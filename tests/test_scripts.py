@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import torch
 
 from pes.algos import build_train_config, train
@@ -30,7 +31,7 @@ def _script(name: str):
 
 
 def _tiny_run(out: Path, **values) -> None:
-    cfg = build_train_config("cbc-tp", "tiny", dict(FAST, episodes=16, eval_episodes=0, **values))
+    cfg = build_train_config("cbc-tp", "tiny", FAST | {"episodes": 16, "eval_episodes": 0} | values)
     train(cfg, out, progress=False)
 
 
@@ -140,12 +141,22 @@ def test_host_speed_replays_a_run_row_for_row_and_compares_its_cpu_time(tmp_path
     spec = importlib.util.spec_from_file_location("host_speed", ROOT / "benchmarks/host_speed.py")
     host_speed = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(host_speed)
-    _tiny_run(tmp_path / "run", threads=1, log_every=4)
+    demonstrations = {"protocol.demonstrations.transitions": 200}
+    _tiny_run(tmp_path / "run", threads=1, episodes=24, log_every=2, **demonstrations)
     then = host_speed.log_rows(tmp_path / "run" / "progress.csv")
     here = host_speed.replay(tmp_path / "run", int(then[-1]["env_steps"]), tmp_path / "again")
     result = host_speed.compare(then, here)
-    assert result["replayed"], (then, here)
-    assert result["env_steps"] == [int(then[0]["env_steps"]), int(then[-1]["env_steps"])]
+    assert result["replayed"] and result["same_work"], (then, here)
+    # from the first row where the demonstrator no longer played: before it, the CPU time is
+    # the demonstrator's collection more than the learner's updates
+    own = [row for row in then if not row["demonstrating"]]
+    assert 2 <= len(own) < len(then) and own[-1] is then[-1]
+    assert result["env_steps"] == [int(own[0]["env_steps"]), int(then[-1]["env_steps"])]
     assert result["cpu_s_then"] > 0 and result["cpu_s_here"] > 0 and result["cpu_ratio"] > 0
     other = [dict(row, success_rate=row["success_rate"] + 0.5) for row in here]
-    assert not host_speed.compare(then, other)["replayed"]  # another training is told apart
+    result = host_speed.compare(then, other)  # another training doing the same work
+    assert not result["replayed"] and result["same_work"]
+    other = [dict(row, updates=row["updates"] + 1) for row in here]
+    assert not host_speed.compare(then, other)["same_work"]
+    with pytest.raises(SystemExit, match="after the demonstrations"):
+        host_speed.compare([dict(row, demonstrating=1.0) for row in then], here)
