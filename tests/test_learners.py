@@ -670,7 +670,8 @@ def test_env_steps_stop_a_run_at_its_experience_budget_and_resume_with_it(tmp_pa
 
 def test_cpu_limit_stops_a_run_by_its_cpu_time_and_resumes_with_it(tmp_path):
     """``cpu_limit`` counts the process's CPU time (what a run shares with nothing else), is
-    kept by the checkpoint and stops the resumed run at the same total."""
+    kept by the checkpoint and stops the resumed run at the same total; ``cpu_scale`` stretches
+    it for a slower CPU."""
     limit = 0.05  # minutes: 3 s of CPU time
     values = {"episodes": 10**6, "cpu_limit": limit, "threads": 1, "eval_episodes": 0}
     cfg = build_train_config("ppo", "tiny", values)
@@ -681,6 +682,12 @@ def test_cpu_limit_stops_a_run_by_its_cpu_time_and_resumes_with_it(tmp_path):
     resumed = train(longer, tmp_path / "run", resume=True, progress=False)
     assert resumed["stopped_by"] == "cpu_limit" and resumed["env_steps"] > summary["env_steps"]
     assert 120 * limit <= resumed["cpu_s"] < 120 * limit + 30
+    # On a CPU 1.5 times slower than the limit's reference the same limit buys 1.5x the time.
+    slower = build_train_config("ppo", "tiny", dict(values, cpu_limit=2 * limit, cpu_scale=1.5))
+    scaled = train(slower, tmp_path / "run", resume=True, progress=False)
+    assert scaled["stopped_by"] == "cpu_limit" and scaled["cpu_scale"] == 1.5
+    assert 180 * limit <= scaled["cpu_s"] < 180 * limit + 30
+    assert scaled["env_steps"] > resumed["env_steps"]
 
 
 @pytest.mark.parametrize("algo", sorted(ALGOS))

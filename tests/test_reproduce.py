@@ -15,7 +15,7 @@ from PIL import Image
 import pes
 from pes.cli import main
 from pes.errors import ConfigError
-from pes.experiments.report import episode_config
+from pes.experiments.report import _curves, episode_config, read_progress, reference_cpu_s
 from pes.experiments.reproduce import reproduce
 from pes.experiments.trials import BUDGETS, eval_config, make_trials, train_config
 from pes.sim.bench import machine_info
@@ -556,6 +556,26 @@ def test_set_changes_every_learner_s_training_and_a_folder_keeps_one_choice(swee
     plain = reproduce("table4", budget="tiny", seeds=1, out=restated, methods=["maddpg"])
     assert plain["skipped"] == 1 and plain["ran"] == 0
     assert "--set" not in (restated / "table4.md").read_text()
+
+
+def test_cpu_scale_says_how_fast_the_machine_is_not_what_a_folder_trained(tmp_path):
+    """A trial trained with ``--set cpu_scale=X`` (a CPU X times slower than the reference of
+    its ``cpu_limit``) is the same trial for a command without it; the report counts its CPU
+    time on the reference CPU (divided by X) and does not name the key."""
+    argv = ["reproduce", "table4", "--budget", "tiny", "--seeds", "1", "--no-ray", "--json"]
+    argv += ["--methods", "maddpg", "--out", str(tmp_path), "--set", "cpu_scale=2"]
+    assert main(argv) == 0
+    plain = reproduce("table4", budget="tiny", seeds=1, out=tmp_path, methods=["maddpg"])
+    assert plain["skipped"] == 1 and plain["ran"] == 0
+    trial = tmp_path / "trials" / "maddpg-s0"
+    done = json.loads((trial / "done.json").read_text())
+    train = done["train"]
+    assert done["spec"]["set"] == {"cpu_scale": 2} and train["cpu_scale"] == 2
+    assert reference_cpu_s(train) == pytest.approx(train["cpu_s"] / 2)
+    logged = read_progress(trial / "run" / "progress.csv")["cpu_s"]
+    curve = _curves(tmp_path, make_trials(["maddpg"], 1, "tiny", False), {"maddpg-s0": done})
+    assert np.allclose(curve["maddpg"][0]["cpu_s"], logged / 2)
+    assert "cpu_scale" not in (tmp_path / "table4.md").read_text()
 
 
 def test_recorded_commands_name_folders_as_the_repository_has_them(tmp_path):

@@ -195,7 +195,9 @@ def table4(
     )
     steps = [_fmt_count([c["env_steps"] for c in costs[col]]) for col in columns]
     minutes = [
-        over_seeds([c["cpu_s"] / 60 for c in costs[col] if c.get("cpu_s") is not None], digits=0)
+        over_seeds(
+            [reference_cpu_s(c) / 60 for c in costs[col] if c.get("cpu_s") is not None], digits=0
+        )
         for col in columns
     ]
     lines.append("| training env steps (PES) | " + " | ".join(steps) + " |")
@@ -304,13 +306,24 @@ def read_progress(path: Path) -> np.ndarray:
     return np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True))
 
 
+def reference_cpu_s(train: dict[str, Any]) -> float:
+    """A run's CPU seconds counted on the reference CPU of its ``cpu_limit``: its ``cpu_s``
+    divided by its ``cpu_scale`` (1 for runs that trained on that CPU or did not record one)."""
+    return train["cpu_s"] / train.get("cpu_scale", 1.0)
+
+
 def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarray]]:
-    """Method -> each seed's progress log as a structured array."""
+    """Method -> each seed's progress log as a structured array, its ``cpu_s`` counted on the
+    reference CPU (:func:`reference_cpu_s`)."""
     curves: dict[str, list] = {}
     for spec in specs:
         log = out / "trials" / spec["id"] / "run" / "progress.csv"
         if spec["kind"] == "train" and spec["id"] in done and log.is_file():
-            curves.setdefault(spec["algo"], []).append(read_progress(log))
+            rows = read_progress(log)
+            scale = (done[spec["id"]].get("train") or {}).get("cpu_scale", 1.0)
+            if scale != 1.0 and "cpu_s" in (rows.dtype.names or ()):
+                rows["cpu_s"] /= scale
+            curves.setdefault(spec["algo"], []).append(rows)
     return curves
 
 
@@ -433,7 +446,8 @@ def _experience_and_compute(curves: dict, folder: Path, plt, training: str) -> t
     caption = (
         "Success rate of every learned method against the env steps it trained on (equal "
         "experience) and against the CPU minutes its process used (equal compute; runs that "
-        f"logged them), over {training}."
+        "logged them; a run on a slower CPU than the reference counts its CPU time divided by "
+        f"its `cpu_scale`), over {training}."
     )
     return name, caption
 

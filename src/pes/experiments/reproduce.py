@@ -92,7 +92,8 @@ def check_trials(out: Path, specs: list[dict]) -> None:
 def same_training(folder: Path, made: dict, spec: dict) -> bool:
     """Whether the training trial in ``folder``, made with spec ``made``, trained with the
     configuration that ``spec`` resolves to now: the specs agree but for their ``set`` keys
-    and its recorded ``run/config.yaml`` equals ``spec``'s resolved config (threads apart)."""
+    and its recorded ``run/config.yaml`` equals ``spec``'s resolved config (apart from
+    ``threads`` and ``cpu_scale``: how the machine runs it, not what it trains)."""
     recorded = folder / "run" / "config.yaml"
     if spec["kind"] != "train" or not recorded.is_file():
         return False
@@ -103,8 +104,9 @@ def same_training(folder: Path, made: dict, spec: dict) -> bool:
     # through YAML as config.yaml was written, so that both sides hold the same types
     asked = yaml.safe_load(yaml.safe_dump(train_config(spec, BUDGETS[spec["budget"]]).to_dict()))
     trained = yaml.safe_load(recorded.read_text())
-    asked.pop("threads", None)
-    trained.pop("threads", None)
+    for machine_key in ("threads", "cpu_scale"):
+        asked.pop(machine_key, None)
+        trained.pop(machine_key, None)
     return asked == trained
 
 
@@ -179,9 +181,11 @@ def reproduce(
     seconds = time.time() - start
     # The report shows every finished trial of the whole programme in ``out``, not only the
     # methods asked for now, so that a sweep run in parts (``--methods``) keeps one report.
+    # ``cpu_scale`` says how fast this machine is, not what the folder trained (same_training).
+    shown = {k: v for k, v in (overrides or {}).items() if k != "cpu_scale"}
     wanted = {*available_methods(), *methods}
     everything = trials_for(
-        target, [m for m in METHODS if m in wanted], seeds, budget, protocol, overrides, scenario
+        target, [m for m in METHODS if m in wanted], seeds, budget, protocol, shown, scenario
     )
     with folder_lock(out, "pes reproduce", wait=True):  # one report writer at a time
         report = write_report(
@@ -194,7 +198,7 @@ def reproduce(
             seconds,
             protocol,
             outside,
-            overrides,
+            shown,
             scenario,
         )
     return {

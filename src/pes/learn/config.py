@@ -125,6 +125,11 @@ class TrainConfig:
     """Stop after this many minutes of this process's CPU time (all its threads; 0 = no
     limit): unlike ``time_limit``, the same work whatever else shares the machine's cores,
     though not on another CPU (docs/training.md)."""
+    cpu_scale: float = 1.0
+    """The CPU time this CPU takes for the work of one CPU minute of the CPU that
+    ``cpu_limit`` is counted on (``benchmarks/host_speed.py`` measures it): the run stops when
+    its CPU time reaches ``cpu_limit * cpu_scale`` minutes, so that a run on a slower CPU does
+    the work of a ``cpu_limit`` run on the reference CPU."""
     env_steps: int = 0
     """Stop after this many environment steps (one control step of one environment; 0 = no
     limit): a budget of experience that is the same on every machine, unlike the time limits
@@ -157,6 +162,8 @@ class TrainConfig:
         for name in (*limits, "checkpoint_every", "eval_episodes", "threads"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be non-negative, got {getattr(self, name)}")
+        if self.cpu_scale <= 0:
+            raise ConfigError(f"cpu_scale must be positive, got {self.cpu_scale}")
         if self.device not in ("cpu", "cuda"):
             raise ConfigError(f"device must be cpu or cuda, got '{self.device}'")
         env = self.env_config()

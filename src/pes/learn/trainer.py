@@ -105,6 +105,7 @@ RESUMABLE_CHANGES = {
     "episodes",
     "time_limit",
     "cpu_limit",
+    "cpu_scale",
     "env_steps",
     "checkpoint_every",
     "eval_episodes",
@@ -337,7 +338,7 @@ class Trainer:
         self.last_ckpt = self.start
         self.row_start = (self.start, prog.env_steps, prog.updates)
         self.deadline = cfg.time_limit * 60.0 if cfg.time_limit > 0 else math.inf
-        self.cpu_deadline = cfg.cpu_limit * 60.0 if cfg.cpu_limit > 0 else math.inf
+        self.cpu_deadline = cfg.cpu_limit * 60.0 * cfg.cpu_scale if cfg.cpu_limit > 0 else math.inf
         # The bar counts what the budget counts: env steps under an env_steps budget, else
         # episodes.
         self.by_steps = cfg.env_steps > 0
@@ -621,6 +622,7 @@ class Trainer:
             "updates": prog.updates,
             "wall_s": round(prog.wall_s, 1),
             "cpu_s": round(prog.cpu_s, 1),
+            "cpu_scale": self.cfg.cpu_scale,  # cpu_s / cpu_scale: minutes of the reference CPU
             "seed": self.cfg.seed,
             "torch": str(torch.__version__),
             "torch_threads": torch.get_num_threads(),  # at the end of the run (or this part)
