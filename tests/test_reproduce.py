@@ -575,7 +575,11 @@ def test_cpu_scale_says_how_fast_the_machine_is_not_what_a_folder_trained(tmp_pa
     logged = read_progress(trial / "run" / "progress.csv")["cpu_s"]
     curve = _curves(tmp_path, make_trials(["maddpg"], 1, "tiny", False), {"maddpg-s0": done})
     assert np.allclose(curve["maddpg"][0]["cpu_s"], logged / 2)
-    assert "cpu_scale" not in (tmp_path / "table4.md").read_text()
+    assert "--set cpu_scale" not in (tmp_path / "table4.md").read_text()
+    assert (
+        f"trials trained on {machine_info()['cpu']} (1, cpu_scale 2)"
+        in (tmp_path / "table4.md").read_text()
+    )
 
 
 def test_recorded_commands_name_folders_as_the_repository_has_them(tmp_path):

@@ -98,9 +98,25 @@ def _changed(meta: dict) -> str:
 def trained_on(trains: Iterable[dict[str, Any]]) -> str:
     """The CPUs that training runs spent their CPU minutes on, from their summaries' ``cpus``
     (a run resumed elsewhere names each machine): ``"A (3), unrecorded CPU (2)"``, the
-    number of runs on each, most first; ``""`` for no runs."""
-    counts = Counter(cpu for train in trains for cpu in train.get("cpus") or ["unrecorded CPU"])
-    return ", ".join(f"{cpu} ({n})" for cpu, n in counts.most_common())
+    number of runs on each, most first, and the ``cpu_scale`` of the runs that had one
+    (``"B (2, cpu_scale 1.19, 1.23)"``); ``""`` for no runs."""
+    counts: Counter = Counter()
+    scales: dict[str, set] = {}
+    for train in trains:
+        for cpu in train.get("cpus") or ["unrecorded CPU"]:
+            counts[cpu] += 1
+            if train.get("cpu_scale", 1.0) != 1.0:
+                scales.setdefault(cpu, set()).add(train["cpu_scale"])
+
+    named = []
+    for cpu, n in counts.most_common():
+        if cpu in scales:
+            named.append(
+                f"{cpu} ({n}, cpu_scale {', '.join(f'{x:g}' for x in sorted(scales[cpu]))})"
+            )
+        else:
+            named.append(f"{cpu} ({n})")
+    return ", ".join(named)
 
 
 def _task(meta: dict) -> str:
