@@ -15,6 +15,14 @@ EPYC"). ``replayed`` says whether it is also the same training to the bit (the s
 success at every row as well); CPUs with other vector instructions may round differently and
 part from it without changing the work. Run it with nothing else on the machine, or with as
 many other jobs as the compared run had beside it.
+
+    python benchmarks/host_speed.py --run A --against B --out /tmp/ratio.json
+
+reads two runs of the same settings instead (B another seed of A, perhaps on another CPU) and
+compares their CPU time per env step over the env steps both logged after the demonstrations
+(each log's ``cpu_s`` interpolated at that stretch's ends), with each run's updates per env step
+there (the same settings do the same work per env step): the ratio that ``cpu_scale`` takes when
+B, trained on a slower CPU, resumes to the work of A's ``cpu_limit`` (docs/training.md).
 """
 
 from __future__ import annotations
@@ -26,6 +34,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 from pes.experiments.report import read_progress
 from pes.sim.bench import machine_info
@@ -91,6 +101,37 @@ def compare(then: list[dict[str, float]], here: list[dict[str, float]]) -> dict:
     }
 
 
+def against(then: list[dict[str, float]], here: list[dict[str, float]]) -> dict:
+    """``here``'s CPU time per env step over ``then``'s (two runs of the same settings, each
+    seed its own log rows) over the env steps both logged after the demonstrations, and each
+    run's updates per env step there."""
+    own = [[row for row in rows if not row["demonstrating"]] for rows in (then, here)]
+    if not all(own):
+        raise SystemExit("host_speed: a run logged no row after the demonstrations")
+    start = max(rows[0]["env_steps"] for rows in own)
+    end = min(rows[-1]["env_steps"] for rows in own)
+    if end <= start:
+        raise SystemExit(
+            "host_speed: the two runs share no stretch of env steps after the demonstrations"
+        )
+
+    def gained(rows: list[dict[str, float]], key: str) -> float:
+        steps = [row["env_steps"] for row in rows]
+        values = [row[key] for row in rows]
+        return float(np.interp(end, steps, values) - np.interp(start, steps, values))
+
+    cpu_then, cpu_here = gained(own[0], "cpu_s"), gained(own[1], "cpu_s")
+    return {
+        "env_steps": [int(start), int(end)],
+        "cpu_s_then": round(cpu_then, 1),
+        "cpu_s_here": round(cpu_here, 1),
+        "cpu_ratio": round(cpu_here / cpu_then, 3),
+        "updates_per_env_step": [
+            float(f"{gained(rows, 'updates') / (end - start):.4g}") for rows in own
+        ],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -99,19 +140,32 @@ def main() -> None:
     parser.add_argument(
         "--env-steps", type=int, default=300_000, help="env steps to replay (default 300,000)"
     )
+    parser.add_argument(
+        "--against",
+        default=None,
+        help="another run of the same settings: compare the two logs, replay nothing",
+    )
     parser.add_argument("--out", default="benchmarks/results/host_speed.json")
     args = parser.parse_args()
     run = Path(args.run)
     if not (run / "config.yaml").is_file() or not (run / "progress.csv").is_file():
         raise SystemExit(f"host_speed: {run} holds no config.yaml and progress.csv")
-    with tempfile.TemporaryDirectory() as tmp:
-        here = replay(run, args.env_steps, Path(tmp) / "run")
-    result = {
-        "machine": machine_info(),
-        "run": str(run),
-        **compare(log_rows(run / "progress.csv"), here),
-        "command": "python benchmarks/host_speed.py " + " ".join(sys.argv[1:]),
-    }
+    command = "python benchmarks/host_speed.py " + " ".join(sys.argv[1:])
+    if args.against is not None:
+        other = Path(args.against)
+        if not (other / "progress.csv").is_file():
+            raise SystemExit(f"host_speed: {other} holds no progress.csv")
+        then, here = log_rows(run / "progress.csv"), log_rows(other / "progress.csv")
+        result = {"run": str(run), "against": str(other), **against(then, here)}
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            here = replay(run, args.env_steps, Path(tmp) / "run")
+        result = {
+            "machine": machine_info(),
+            "run": str(run),
+            **compare(log_rows(run / "progress.csv"), here),
+        }
+    result["command"] = command
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result))

@@ -160,3 +160,36 @@ def test_host_speed_replays_a_run_row_for_row_and_compares_its_cpu_time(tmp_path
     assert not host_speed.compare(then, other)["same_work"]
     with pytest.raises(SystemExit, match="after the demonstrations"):
         host_speed.compare([dict(row, demonstrating=1.0) for row in then], here)
+
+
+def test_host_speed_compares_two_seeds_over_the_env_steps_both_logged():
+    """``--against``: two runs of the same settings log rows at different env steps; their CPU
+    time per env step is compared over the stretch both cover after the demonstrations."""
+    spec = importlib.util.spec_from_file_location("host_speed", ROOT / "benchmarks/host_speed.py")
+    host_speed = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(host_speed)
+
+    def rows(steps, seconds_per_step, demonstrating=100):
+        return [
+            {
+                "env_steps": float(n),
+                "updates": n / 16,
+                "cpu_s": 50.0 + seconds_per_step * n,
+                "success_rate": 0.0,
+                "demonstrating": float(n <= demonstrating),
+            }
+            for n in steps
+        ]
+
+    then = rows([100, 200, 400, 600, 800], 0.5)
+    here = rows([100, 150, 350, 550, 650, 900], 0.6, demonstrating=150)
+    result = host_speed.against(then, here)
+    assert result["env_steps"] == [350, 800]
+    assert result["cpu_s_then"] == pytest.approx(0.5 * 450)
+    assert result["cpu_s_here"] == pytest.approx(0.6 * 450)
+    assert result["cpu_ratio"] == pytest.approx(1.2)
+    assert result["updates_per_env_step"] == [0.0625, 0.0625]
+    with pytest.raises(SystemExit, match="share no stretch"):
+        host_speed.against(then, rows([100, 900, 1000], 0.6, demonstrating=850))
+    with pytest.raises(SystemExit, match="no row after the demonstrations"):
+        host_speed.against(then, rows([100, 200], 0.6, demonstrating=300))
