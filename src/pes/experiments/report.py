@@ -105,7 +105,7 @@ def trained_on(trains: Iterable[dict[str, Any]]) -> str:
     for train in trains:
         for cpu in train.get("cpus") or ["unrecorded CPU"]:
             counts[cpu] += 1
-            if train.get("cpu_scale", 1.0) != 1.0:
+            if cpu_scale(train) != 1.0:
                 scales.setdefault(cpu, set()).add(train["cpu_scale"])
 
     named = []
@@ -322,10 +322,16 @@ def read_progress(path: Path) -> np.ndarray:
     return np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True))
 
 
+def cpu_scale(train: dict[str, Any]) -> float:
+    """A run's ``cpu_scale`` from its summary (1 for runs that trained on the reference CPU of
+    their ``cpu_limit`` or did not record one)."""
+    return train.get("cpu_scale", 1.0)
+
+
 def reference_cpu_s(train: dict[str, Any]) -> float:
     """A run's CPU seconds counted on the reference CPU of its ``cpu_limit``: its ``cpu_s``
-    divided by its ``cpu_scale`` (1 for runs that trained on that CPU or did not record one)."""
-    return train["cpu_s"] / train.get("cpu_scale", 1.0)
+    divided by its :func:`cpu_scale`."""
+    return train["cpu_s"] / cpu_scale(train)
 
 
 def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarray]]:
@@ -336,9 +342,8 @@ def _curves(out: Path, specs: list[dict], done: dict) -> dict[str, list[np.ndarr
         log = out / "trials" / spec["id"] / "run" / "progress.csv"
         if spec["kind"] == "train" and spec["id"] in done and log.is_file():
             rows = read_progress(log)
-            scale = (done[spec["id"]].get("train") or {}).get("cpu_scale", 1.0)
-            if scale != 1.0 and "cpu_s" in (rows.dtype.names or ()):
-                rows["cpu_s"] /= scale
+            if "cpu_s" in (rows.dtype.names or ()):
+                rows["cpu_s"] /= cpu_scale(done[spec["id"]].get("train") or {})
             curves.setdefault(spec["algo"], []).append(rows)
     return curves
 

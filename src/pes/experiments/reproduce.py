@@ -89,11 +89,16 @@ def check_trials(out: Path, specs: list[dict]) -> None:
                 )
 
 
+MACHINE_KEYS = ("threads", "cpu_scale")
+"""Training keys that say how a machine runs a trial, not what it trains: a trial made with
+other values of them is the same trial, and reports do not name them as the folder's settings."""
+
+
 def same_training(folder: Path, made: dict, spec: dict) -> bool:
     """Whether the training trial in ``folder``, made with spec ``made``, trained with the
     configuration that ``spec`` resolves to now: the specs agree but for their ``set`` keys
     and its recorded ``run/config.yaml`` equals ``spec``'s resolved config (apart from
-    ``threads`` and ``cpu_scale``: how the machine runs it, not what it trains)."""
+    :data:`MACHINE_KEYS`)."""
     recorded = folder / "run" / "config.yaml"
     if spec["kind"] != "train" or not recorded.is_file():
         return False
@@ -104,7 +109,7 @@ def same_training(folder: Path, made: dict, spec: dict) -> bool:
     # through YAML as config.yaml was written, so that both sides hold the same types
     asked = yaml.safe_load(yaml.safe_dump(train_config(spec, BUDGETS[spec["budget"]]).to_dict()))
     trained = yaml.safe_load(recorded.read_text())
-    for machine_key in ("threads", "cpu_scale"):
+    for machine_key in MACHINE_KEYS:
         asked.pop(machine_key, None)
         trained.pop(machine_key, None)
     return asked == trained
@@ -181,8 +186,7 @@ def reproduce(
     seconds = time.time() - start
     # The report shows every finished trial of the whole programme in ``out``, not only the
     # methods asked for now, so that a sweep run in parts (``--methods``) keeps one report.
-    # ``cpu_scale`` says how fast this machine is, not what the folder trained (same_training).
-    shown = {k: v for k, v in (overrides or {}).items() if k != "cpu_scale"}
+    shown = {k: v for k, v in (overrides or {}).items() if k not in MACHINE_KEYS}
     wanted = {*available_methods(), *methods}
     everything = trials_for(
         target, [m for m in METHODS if m in wanted], seeds, budget, protocol, shown, scenario
